@@ -1,0 +1,16 @@
+//! supertoroid: fits supertoroids (one-hole superquadrics; superellipsoids as a4 = 0) to
+//! 3D point clouds, after Badia Torres et al., "Supertoroid fitting of objects with holes
+//! for robotic grasping and scene generation".
+//!
+//! Architecture, bottom-up:
+//! * [`model`]: the surface in f64: shape, pose, inside-outside function, meridian radial
+//!   distance, differential geometry. The reference for everything else.
+//! * [`synth`]: seeded synthetic clouds with ground truth (surface samples, single-view
+//!   renders with depth images, noise, outliers).
+//! * [`io`]: cloud readers and writers.
+//! * [`cli`]: the `supertoroid` command line.
+
+pub mod cli;
+pub mod io;
+pub mod model;
+pub mod synth;

@@ -1,0 +1,18 @@
+//! The supertoroid model (paper §II): shape, pose, the inside-outside function, the
+//! parametric surface, the mean superellipse, the meridian radial distance (§III) and the
+//! differential geometry of §IV. Everything here is plain f64 and allocation-free; it is
+//! the reference that the GPU kernels and the solver are tested against.
+
+mod differential;
+mod distance;
+mod shape;
+
+pub use differential::{normal_curvatures, tangents, unit_normal, NormalCurvatures};
+pub use distance::{
+    meridian_distance, meridian_distance_stepwise, meridian_residual_with_gradient,
+    MeridianPoint, ResidualGradient,
+};
+pub use shape::{
+    mean_superellipse_point, mean_superellipse_radius, signed_pow, superellipse_norm, Pose,
+    Shape, ShapeBounds,
+};

@@ -1,0 +1,17 @@
+//! Synthetic, seeded point clouds with known ground truth: near-uniform surface samples,
+//! single-view renders through a pinhole camera with a z-buffer (and the depth image it
+//! produces), Gaussian noise and uniform outliers.
+
+mod camera;
+mod sampling;
+
+pub use camera::{render_view, Camera, DepthImage, Intrinsics, RenderedView};
+pub use sampling::{add_noise, add_outliers, sample_surface, subsample};
+
+/// A seeded random generator, the same stream on every platform.
+pub type SeededRng = rand::rngs::StdRng;
+
+pub fn rng(seed: u64) -> SeededRng {
+    use rand::SeedableRng;
+    SeededRng::seed_from_u64(seed)
+}
