@@ -1,6 +1,7 @@
 //! The `supertoroid` command line. Bad input gives one clear line on stderr and exit
 //! code 2; internal failures exit 1.
 
+use crate::eval::{make_evaluator, Backend, Normalization};
 use crate::io::{read_cloud, write_cloud};
 use crate::model::{meridian_distance, Pose, Shape};
 use crate::synth::{self, Camera, Intrinsics};
@@ -77,6 +78,10 @@ pub struct SampleArgs {
 pub struct DistanceArgs {
     #[command(flatten)]
     pub object: ShapePoseArgs,
+    /// evaluator: cpu (f64 reference), gpu (WGSL; fails without an adapter), auto (GPU
+    /// when found); default from SUPERTOROID_BACKEND, else cpu
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
     /// input cloud (.xyz)
     pub file: PathBuf,
 }
@@ -148,10 +153,21 @@ fn sample(args: SampleArgs) -> Result<(), Failure> {
 fn distance(args: DistanceArgs) -> Result<(), Failure> {
     let (shape, pose) = args.object.parse().map_err(Failure::input)?;
     let points = read_cloud(&args.file).map_err(|e| Failure::input(format!("{}: {e}", args.file.display())))?;
+    let backend = args.backend.or_else(Backend::from_env).unwrap_or(Backend::Cpu);
+    let distances: Vec<f64> = if backend == Backend::Cpu {
+        points.iter().map(|p| meridian_distance(&shape, pose.to_canonical(*p)).distance).collect()
+    } else {
+        let mut evaluator = make_evaluator(backend).map_err(|e| Failure { code: 1, message: e.to_string() })?;
+        let norm = Normalization::of(&points);
+        evaluator.set_points(&norm.points(&points)).map_err(|e| Failure { code: 1, message: e.to_string() })?;
+        let r = evaluator
+            .residuals(&[norm.candidate(&shape, &pose)])
+            .map_err(|e| Failure { code: 1, message: e.to_string() })?;
+        r.into_iter().map(|r| (r * norm.scale).abs()).collect()
+    };
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
-    for p in points {
-        let d = meridian_distance(&shape, pose.to_canonical(p)).distance;
+    for d in distances {
         writeln!(out, "{d}").map_err(|e| Failure { code: 1, message: e.to_string() })?;
     }
     out.flush().map_err(|e| Failure { code: 1, message: e.to_string() })

@@ -7,10 +7,13 @@
 //!   distance, differential geometry. The reference for everything else.
 //! * [`synth`]: seeded synthetic clouds with ground truth (surface samples, single-view
 //!   renders with depth images, noise, outliers).
+//! * [`eval`]: evaluators (residuals, Jacobians, normal equations for batches of
+//!   candidates): WGSL compute shaders through wgpu, and the f64 CPU reference.
 //! * [`io`]: cloud readers and writers.
 //! * [`cli`]: the `supertoroid` command line.
 
 pub mod cli;
+pub mod eval;
 pub mod io;
 pub mod model;
 pub mod synth;

@@ -77,3 +77,24 @@ fn bad_input_gives_one_line_and_exit_code_2() {
         assert!(stderr.starts_with("error: ") && stderr.trim().lines().count() == 1, "{args:?}: {stderr}");
     }
 }
+
+#[test]
+fn distance_on_the_gpu_matches_the_cpu() {
+    let out = tmp("g.xyz");
+    assert!(bin()
+        .args(["sample", "--shape", SHAPE, "--points", "300", "--noise", "0.05", "--seed", "9", "-o", out.to_str().unwrap()])
+        .status()
+        .unwrap()
+        .success());
+    let run = |backend: &str| -> Vec<f64> {
+        let o = bin().args(["distance", "--shape", SHAPE, "--backend", backend]).arg(&out).env("WGPU_BACKEND", "vulkan").output().unwrap();
+        assert!(o.status.success(), "{backend}: {}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap().lines().map(|l| l.parse().unwrap()).collect()
+    };
+    let (cpu, gpu) = (run("cpu"), run("gpu"));
+    assert_eq!(cpu.len(), 300);
+    let size = 0.05f64.hypot(0.04) * 3.2;
+    for (a, b) in cpu.iter().zip(&gpu) {
+        assert!((a - b).abs() < 1e-4 * size, "{a} vs {b}");
+    }
+}
