@@ -28,6 +28,31 @@ pub enum Command {
     ///
     /// Example: supertoroid distance --shape 0.05,0.05,0.02,2,1,1 mug.xyz
     Distance(DistanceArgs),
+    /// Fit a supertoroid to a cloud and print the result as one JSON object (shape, pose,
+    /// quality, timing, iterations, backend, points; see the README).
+    ///
+    /// Example: supertoroid fit mug.xyz --seed 3 --backend cpu
+    Fit(FitArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct FitArgs {
+    /// input cloud (.xyz)
+    pub file: PathBuf,
+    /// seed of the random downsampling
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// evaluator: auto (GPU when found), gpu, cpu; default from SUPERTOROID_BACKEND, else auto
+    #[arg(long, value_enum)]
+    pub backend: Option<Backend>,
+    /// points in stage 1 / stage 2 (the paper's 150 / 1000)
+    #[arg(long, default_value_t = 150)]
+    pub stage1_points: usize,
+    #[arg(long, default_value_t = 1000)]
+    pub stage2_points: usize,
+    /// known hole axis x,y,z in the cloud's frame (e.g. 0,0,1 for "on a table, hole up")
+    #[arg(long, allow_hyphen_values = true)]
+    pub axis: Option<String>,
 }
 
 /// Shape and pose of a supertoroid, as the CLI takes them.
@@ -120,6 +145,7 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Sample(args) => sample(args),
         Command::Distance(args) => distance(args),
+        Command::Fit(args) => fit(args),
     }
 }
 
@@ -171,4 +197,27 @@ fn distance(args: DistanceArgs) -> Result<(), Failure> {
         writeln!(out, "{d}").map_err(|e| Failure { code: 1, message: e.to_string() })?;
     }
     out.flush().map_err(|e| Failure { code: 1, message: e.to_string() })
+}
+
+fn fit(args: FitArgs) -> Result<(), Failure> {
+    let points = read_cloud(&args.file).map_err(|e| Failure::input(format!("{}: {e}", args.file.display())))?;
+    let known_axis = match &args.axis {
+        Some(a) => Some(glam::DVec3::from_array(crate::model::parse_floats::<3>(a, "axis x,y,z").map_err(Failure::input)?)),
+        None => None,
+    };
+    let options = crate::fit::FitOptions {
+        seed: args.seed,
+        stage1_points: args.stage1_points,
+        stage2_points: args.stage2_points,
+        known_axis,
+        ..Default::default()
+    };
+    let backend = args.backend.or_else(Backend::from_env).unwrap_or(Backend::Auto);
+    let mut evaluator = make_evaluator(backend).map_err(|e| Failure { code: 1, message: e.to_string() })?;
+    let report = crate::fit::fit(evaluator.as_mut(), &points, &options).map_err(|e| match e {
+        crate::fit::FitError::Evaluator(m) => Failure { code: 1, message: m },
+        other => Failure::input(other.to_string()),
+    })?;
+    println!("{}", serde_json::to_string_pretty(&report).map_err(|e| Failure { code: 1, message: e.to_string() })?);
+    Ok(())
 }

@@ -14,6 +14,8 @@
 
 pub mod cli;
 pub mod eval;
+pub mod fit;
 pub mod io;
 pub mod model;
+pub mod solve;
 pub mod synth;

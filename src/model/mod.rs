@@ -13,6 +13,6 @@ pub use distance::{
     MeridianPoint, ResidualGradient,
 };
 pub use shape::{
-    mean_superellipse_point, mean_superellipse_radius, signed_pow, superellipse_norm, Pose,
+    mean_superellipse_point, mean_superellipse_radius, parse_floats, signed_pow, superellipse_norm, Pose,
     Shape, ShapeBounds,
 };

@@ -225,7 +225,7 @@ impl Pose {
 }
 
 /// Parses exactly `N` comma-separated finite floats.
-pub(crate) fn parse_floats<const N: usize>(text: &str, what: &str) -> Result<[f64; N], String> {
+pub fn parse_floats<const N: usize>(text: &str, what: &str) -> Result<[f64; N], String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     if parts.len() != N {
         return Err(format!("{what}: expected {N} comma-separated numbers, got {:?}", text));

@@ -1,0 +1,89 @@
+//! The ground-truth suite: random supertoroids in the ranges of issue 4, clouds full or
+//! single-view partial, with noise and outliers, and the success rule (centre within 5%
+//! of the size, hole axis within 5 degrees, each a_i within 10%, each eps within 0.15,
+//! up to the shape's symmetries: axis sign, and the a1/a2 swap with a quarter turn).
+
+use crate::model::{Pose, Shape};
+use crate::synth::{self, Camera, Intrinsics};
+use glam::{DQuat, DVec3};
+use rand::Rng;
+
+#[derive(Clone, Debug)]
+pub struct Case {
+    pub shape: Shape,
+    pub pose: Pose,
+    pub partial: bool,
+    /// noise sigma as a fraction of the size
+    pub noise: f64,
+    pub outlier_fraction: f64,
+    pub points: Vec<DVec3>,
+}
+
+/// One seeded case of the given category.
+pub fn make_case(seed: u64, partial: bool, noise: f64, outlier_fraction: f64) -> Case {
+    let mut rng = synth::rng(seed);
+    let shape = Shape::new(
+        rng.random_range(0.03..0.12),
+        rng.random_range(0.03..0.12),
+        rng.random_range(0.01..0.06),
+        rng.random_range(1.2..3.0),
+        rng.random_range(0.3..1.8),
+        rng.random_range(0.3..1.8),
+    );
+    let axis = DVec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)).normalize_or(DVec3::Z);
+    let pose = Pose::new(
+        DQuat::from_axis_angle(axis, rng.random_range(-3.1..3.1)),
+        DVec3::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3), rng.random_range(0.4..1.0)),
+    );
+    let mut points = if partial {
+        let camera = Camera::random_view(&shape, &pose, Intrinsics::REALSENSE_640X480, &mut rng);
+        let view = synth::render_view(&shape, &pose, &camera, 0.0001).expect("valid shape and camera");
+        synth::subsample(&view.points, 2000, &mut rng)
+    } else {
+        synth::sample_surface(&shape, &pose, 2000, &mut rng)
+    };
+    synth::add_noise(&mut points, noise * shape.size(), &mut rng);
+    synth::add_outliers(&mut points, &shape, &pose, outlier_fraction, &mut rng);
+    Case { shape, pose, partial, noise, outlier_fraction, points }
+}
+
+/// Errors of a fit against the truth, after resolving the symmetries.
+#[derive(Clone, Copy, Debug)]
+pub struct Errors {
+    /// centre distance / size
+    pub centre: f64,
+    /// degrees between the hole axes (sign ignored)
+    pub axis_degrees: f64,
+    /// largest relative error of a1, a2, a3
+    pub sizes: f64,
+    /// a4 relative error
+    pub a4: f64,
+    /// largest absolute error of eps1, eps2
+    pub eps: f64,
+}
+
+impl Errors {
+    pub fn success(&self) -> bool {
+        self.centre < 0.05 && self.axis_degrees < 5.0 && self.sizes < 0.10 && self.a4 < 0.10 && self.eps < 0.15
+    }
+}
+
+pub fn compare(truth: (&Shape, &Pose), fitted: (&Shape, &Pose)) -> Errors {
+    let (ts, tp) = truth;
+    let (fs, fp) = fitted;
+    let size = ts.size();
+    let centre = (tp.translation - fp.translation).length() / size;
+    let cos = tp.axis().dot(fp.axis()).abs().min(1.0);
+    let axis_degrees = cos.acos().to_degrees();
+    // a1/a2 swap with a quarter turn: decide by which fitted in-plane axis follows the true x
+    let fitted_x = fp.rotation * DVec3::X;
+    let fitted_y = fp.rotation * DVec3::Y;
+    let true_x = tp.rotation * DVec3::X;
+    let (fa1, fa2) = if true_x.dot(fitted_x).abs() >= true_x.dot(fitted_y).abs() { (fs.a1, fs.a2) } else { (fs.a2, fs.a1) };
+    let rel = |a: f64, b: f64| (a - b).abs() / b;
+    let sizes = rel(fa1, ts.a1).max(rel(fa2, ts.a2)).max(rel(fs.a3, ts.a3));
+    // a4 scales a1/a2: compare the mean-superellipse radii a1·a4, a2·a4 too
+    let a4 = rel(fs.a4, ts.a4);
+    let eps = (fs.eps1 - ts.eps1).abs().max((fs.eps2 - ts.eps2).abs());
+    Errors { centre, axis_degrees, sizes, a4, eps }
+}

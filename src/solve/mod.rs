@@ -1,0 +1,284 @@
+//! Primal-dual interior-point method for bound-constrained (robust) nonlinear least
+//! squares over the 12 supertoroid parameters, run for a batch of starts in lockstep so
+//! that every iteration is one batched evaluator call.
+//!
+//! Per start: Gauss-Newton model H = JtWJ from the evaluator's normal equations,
+//! log-barrier on the shape bounds with dual variables z (z_l·(x - l) = mu on the
+//! central path), Levenberg-Marquardt damping for global convergence (a trial step is
+//! accepted only if the barrier merit decreases, else the damping grows), the
+//! fraction-to-boundary rule so iterates stay strictly inside, and the rotation updated
+//! on the manifold (R <- R·exp([d]x), the increment starting from 0 every iteration).
+
+use crate::eval::{Candidate, EvalError, Evaluator, Loss, NUM_PARAMS};
+use crate::model::Shape;
+use glam::DQuat;
+use nalgebra::{SMatrix, SVector};
+
+type Vec12 = SVector<f64, NUM_PARAMS>;
+type Mat12 = SMatrix<f64, NUM_PARAMS, NUM_PARAMS>;
+
+/// Box bounds on the six shape parameters (pose parameters are free).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bounds {
+    pub lower: [f64; 6],
+    pub upper: [f64; 6],
+}
+
+impl Bounds {
+    /// Sizes in (size_min, size_max), a4 in (0, a4_max), eps in (eps_min, eps_max).
+    pub fn new(size_min: f64, size_max: f64, a4_max: f64, eps_min: f64, eps_max: f64) -> Self {
+        Self {
+            lower: [size_min, size_min, size_min, 0.0, eps_min, eps_min],
+            upper: [size_max, size_max, size_max, a4_max, eps_max, eps_max],
+        }
+    }
+
+    /// Moves a shape strictly inside the bounds (by 1% of each range at least).
+    pub fn interior(&self, shape: &Shape) -> Shape {
+        let mut v = shape.to_array();
+        for i in 0..6 {
+            let margin = 0.01 * (self.upper[i] - self.lower[i]);
+            v[i] = v[i].clamp(self.lower[i] + margin, self.upper[i] - margin);
+        }
+        Shape::from_array(v)
+    }
+}
+
+/// Solver settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolverOptions {
+    pub max_iterations: usize,
+    /// stop when the relative decrease of the cost stays below this (and mu is small)
+    pub cost_tolerance: f64,
+    /// stop when the step is below this (in the normalised frame)
+    pub step_tolerance: f64,
+    /// stop when the largest gradient component of the barrier merit is below this
+    /// times the cost
+    pub gradient_tolerance: f64,
+    pub loss: Loss,
+    /// linear reward -w·a4·count added to the cost: favours a larger a4 (a wider hole),
+    /// the paper's stage-2 term for partial clouds
+    pub a4_reward: f64,
+    /// optional mask of parameters held fixed (true = fixed), e.g. a known hole axis
+    pub fixed: [bool; NUM_PARAMS],
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        Self {
+            max_iterations: 60,
+            cost_tolerance: 1e-7,
+            step_tolerance: 1e-8,
+            gradient_tolerance: 1e-9,
+            loss: Loss::Squared,
+            a4_reward: 0.0,
+            fixed: [false; NUM_PARAMS],
+        }
+    }
+}
+
+/// Why a start stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stop {
+    CostChange,
+    SmallStep,
+    SmallGradient,
+    IterationCap,
+    NoProgress,
+}
+
+/// One line of the iteration log.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LogLine {
+    pub iteration: usize,
+    pub cost: f64,
+    pub mu: f64,
+    pub damping: f64,
+    pub step: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct Solution {
+    pub candidate: Candidate,
+    /// sum of rho(r) at the solution (without barrier or reward terms)
+    pub cost: f64,
+    pub count: u64,
+    pub iterations: usize,
+    pub stop: Stop,
+    pub log: Vec<LogLine>,
+}
+
+struct State {
+    c: Candidate,
+    z_lower: [f64; 6],
+    z_upper: [f64; 6],
+    mu: f64,
+    damping: f64,
+    cost: f64,
+    count: u64,
+    iterations: usize,
+    small_changes: usize,
+    stop: Option<Stop>,
+    log: Vec<LogLine>,
+}
+
+fn barrier(shape: &Shape, b: &Bounds, mu: f64) -> f64 {
+    let v = shape.to_array();
+    (0..6).map(|i| -mu * ((v[i] - b.lower[i]).ln() + (b.upper[i] - v[i]).ln())).sum()
+}
+
+fn merit(cost: f64, count: u64, shape: &Shape, b: &Bounds, mu: f64, o: &SolverOptions) -> f64 {
+    cost - o.a4_reward * shape.a4 * count as f64 + barrier(shape, b, mu)
+}
+
+/// Applies a parameter step: shape and translation additively, rotation on the manifold.
+pub fn apply_step(c: &Candidate, step: &[f64; NUM_PARAMS]) -> Candidate {
+    let mut shape = c.shape.to_array();
+    for i in 0..6 {
+        shape[i] += step[i];
+    }
+    let mut pose = c.pose;
+    pose.translation += glam::DVec3::new(step[6], step[7], step[8]);
+    pose.rotation = (pose.rotation * DQuat::from_scaled_axis(glam::DVec3::new(step[9], step[10], step[11]))).normalize();
+    Candidate { shape: Shape::from_array(shape), pose }
+}
+
+/// Solves from every start (batched through the evaluator) and returns one solution per start.
+pub fn solve(evaluator: &mut dyn Evaluator, starts: &[Candidate], bounds: &Bounds, o: &SolverOptions) -> Result<Vec<Solution>, EvalError> {
+    let first = evaluator.costs(&starts.iter().map(|s| Candidate { shape: bounds.interior(&s.shape), ..*s }).collect::<Vec<_>>(), o.loss)?;
+    let mut states: Vec<State> = starts
+        .iter()
+        .zip(&first)
+        .map(|(s, c0)| {
+            let c = Candidate { shape: bounds.interior(&s.shape), ..*s };
+            // initial barrier weight: small against the cost, and the duals on the central path
+            let mu = 1e-3 * c0.cost.max(1e-12) / 12.0;
+            let v = c.shape.to_array();
+            let mut z_lower = [0.0; 6];
+            let mut z_upper = [0.0; 6];
+            for i in 0..6 {
+                z_lower[i] = mu / (v[i] - bounds.lower[i]);
+                z_upper[i] = mu / (bounds.upper[i] - v[i]);
+            }
+            State { c, z_lower, z_upper, mu, damping: 1e-3, cost: c0.cost, count: c0.count, iterations: 0, small_changes: 0, stop: None, log: Vec::new() }
+        })
+        .collect();
+
+    for _ in 0..o.max_iterations {
+        let active: Vec<usize> = (0..states.len()).filter(|&i| states[i].stop.is_none()).collect();
+        if active.is_empty() {
+            break;
+        }
+        let cands: Vec<Candidate> = active.iter().map(|&i| states[i].c).collect();
+        let normal = evaluator.normal_equations(&cands, o.loss)?;
+        // Newton systems for every active start, then damping retries until each either
+        // finds a decrease of its merit or gives up.
+        let mut pending: Vec<(usize, Mat12, Vec12)> = Vec::new();
+        for (slot, &i) in active.iter().enumerate() {
+            let s = &mut states[i];
+            let ne = &normal[slot];
+            s.cost = ne.cost;
+            s.count = ne.count;
+            s.iterations += 1;
+            let mut h = Mat12::from_fn(|a, b| ne.jtj[a][b]);
+            let mut g = Vec12::from_fn(|a, _| ne.jtr[a]);
+            g[3] -= o.a4_reward * ne.count as f64;
+            let v = s.c.shape.to_array();
+            for k in 0..6 {
+                let (dl, du) = (v[k] - bounds.lower[k], bounds.upper[k] - v[k]);
+                g[k] += -s.mu / dl + s.mu / du;
+                h[(k, k)] += s.z_lower[k] / dl + s.z_upper[k] / du;
+            }
+            for k in 0..NUM_PARAMS {
+                if o.fixed[k] {
+                    g[k] = 0.0;
+                    for j in 0..NUM_PARAMS {
+                        h[(k, j)] = 0.0;
+                        h[(j, k)] = 0.0;
+                    }
+                    h[(k, k)] = 1.0;
+                }
+            }
+            let gmax = g.amax();
+            if gmax <= o.gradient_tolerance * s.cost.max(1e-300) && s.mu < 1e-10 * s.cost.max(1e-300) {
+                s.stop = Some(Stop::SmallGradient);
+                continue;
+            }
+            pending.push((i, h, g));
+        }
+        let mut tries = 0;
+        while !pending.is_empty() && tries < 8 {
+            tries += 1;
+            let mut trials = Vec::new();
+            for (i, h, g) in &pending {
+                let s = &states[*i];
+                let mut damped = *h;
+                for k in 0..NUM_PARAMS {
+                    damped[(k, k)] += s.damping * h[(k, k)].max(1e-12);
+                }
+                let step = damped.cholesky().map(|ch| ch.solve(&(-g))).unwrap_or_else(|| -g / (h.diagonal().amax().max(1e-12) * (1.0 + s.damping)));
+                // fraction to the boundary: keep 0.5% of the distance to every bound
+                let v = s.c.shape.to_array();
+                let mut alpha: f64 = 1.0;
+                for k in 0..6 {
+                    if step[k] < 0.0 {
+                        alpha = alpha.min(-0.995 * (v[k] - bounds.lower[k]) / step[k]);
+                    } else if step[k] > 0.0 {
+                        alpha = alpha.min(0.995 * (bounds.upper[k] - v[k]) / step[k]);
+                    }
+                }
+                let step: [f64; NUM_PARAMS] = std::array::from_fn(|k| alpha * step[k]);
+                trials.push((apply_step(&s.c, &step), step));
+            }
+            let trial_costs = evaluator.costs(&trials.iter().map(|t| t.0).collect::<Vec<_>>(), o.loss)?;
+            let mut still = Vec::new();
+            for ((entry, (trial, step)), tc) in pending.into_iter().zip(trials).zip(trial_costs) {
+                let i = entry.0;
+                let s = &mut states[i];
+                let before = merit(s.cost, s.count, &s.c.shape, bounds, s.mu, o);
+                let after = merit(tc.cost, tc.count, &trial.shape, bounds, s.mu, o);
+                let step_norm = step.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if after.is_finite() && tc.count == s.count && after <= before {
+                    // dual update towards the central path of the current mu, then a
+                    // smaller mu from the complementarity that was reached
+                    let v = trial.shape.to_array();
+                    let mut gap = 0.0;
+                    for k in 0..6 {
+                        let (dl, du) = (v[k] - bounds.lower[k], bounds.upper[k] - v[k]);
+                        s.z_lower[k] = (s.mu / dl).max(1e-300);
+                        s.z_upper[k] = (s.mu / du).max(1e-300);
+                        gap += s.z_lower[k] * dl + s.z_upper[k] * du;
+                    }
+                    let relative = (s.cost - tc.cost).abs() / s.cost.max(1e-300);
+                    s.c = trial;
+                    s.cost = tc.cost;
+                    s.mu = (0.1 * gap / 12.0).max(1e-14 * tc.cost.max(1e-300));
+                    s.damping = (s.damping / 3.0).max(1e-9);
+                    s.log.push(LogLine { iteration: s.iterations, cost: s.cost, mu: s.mu, damping: s.damping, step: step_norm });
+                    s.small_changes = if relative < o.cost_tolerance { s.small_changes + 1 } else { 0 };
+                    if s.small_changes >= 2 {
+                        s.stop = Some(Stop::CostChange);
+                    } else if step_norm < o.step_tolerance {
+                        s.stop = Some(Stop::SmallStep);
+                    }
+                } else {
+                    s.damping *= 10.0;
+                    if s.damping > 1e10 || step_norm < o.step_tolerance {
+                        s.stop = Some(Stop::NoProgress);
+                    } else {
+                        still.push(entry);
+                    }
+                }
+            }
+            pending = still;
+        }
+        for (i, _, _) in pending {
+            states[i].stop = Some(Stop::NoProgress);
+        }
+    }
+    Ok(states
+        .into_iter()
+        .map(|s| Solution { candidate: s.c, cost: s.cost, count: s.count, iterations: s.iterations, stop: s.stop.unwrap_or(Stop::IterationCap), log: s.log })
+        .collect())
+}

@@ -1,0 +1,145 @@
+//! The interior-point solver on problems with known solutions, through a mock evaluator
+//! whose residuals are explicit functions of the parameter vector.
+
+use glam::DVec3;
+use proptest::prelude::*;
+use supertoroid::eval::*;
+use supertoroid::model::{Pose, Shape};
+use supertoroid::solve::{solve, Bounds, SolverOptions, Stop};
+
+/// Residuals r(theta) of the first nine parameters (shape, translation) with their Jacobian.
+struct Mock {
+    residuals: fn(&[f64; 9]) -> (Vec<f64>, Vec<[f64; 9]>),
+    seen: Vec<Candidate>,
+}
+
+fn theta(c: &Candidate) -> [f64; 9] {
+    let s = c.shape.to_array();
+    let t = c.pose.translation;
+    [s[0], s[1], s[2], s[3], s[4], s[5], t.x, t.y, t.z]
+}
+
+impl Evaluator for Mock {
+    fn kind(&self) -> &'static str { "mock" }
+    fn device_name(&self) -> String { "mock".into() }
+    fn set_points(&mut self, _: &[DVec3]) -> Result<(), EvalError> { Ok(()) }
+    fn normal_equations(&mut self, cs: &[Candidate], loss: Loss) -> Result<Vec<NormalEquations>, EvalError> {
+        self.seen.extend_from_slice(cs);
+        Ok(cs.iter().map(|c| {
+            let (r, j) = (self.residuals)(&theta(c));
+            let mut ne = NormalEquations::zero();
+            for (ri, ji) in r.iter().zip(&j) {
+                let (rho, w) = loss.eval(*ri);
+                for a in 0..9 {
+                    for b in 0..9 {
+                        ne.jtj[a][b] += w * ji[a] * ji[b];
+                    }
+                    ne.jtr[a] += w * ji[a] * ri;
+                }
+                ne.cost += rho;
+                ne.count += 1;
+            }
+            ne
+        }).collect())
+    }
+    fn costs(&mut self, cs: &[Candidate], loss: Loss) -> Result<Vec<Cost>, EvalError> {
+        Ok(cs.iter().map(|c| {
+            let (r, _) = (self.residuals)(&theta(c));
+            Cost { cost: r.iter().map(|x| loss.eval(*x).0).sum(), count: r.len() as u64 }
+        }).collect())
+    }
+    fn residuals(&mut self, cs: &[Candidate]) -> Result<Vec<f64>, EvalError> {
+        Ok(cs.iter().flat_map(|c| (self.residuals)(&theta(c)).0).collect())
+    }
+}
+
+fn start(v: [f64; 6]) -> Candidate {
+    Candidate { shape: Shape::from_array(v), pose: Pose::new(glam::DQuat::IDENTITY, DVec3::ZERO) }
+}
+
+fn rotation_fixed() -> SolverOptions {
+    let mut o = SolverOptions { max_iterations: 200, cost_tolerance: 1e-12, ..Default::default() };
+    for k in 6..12 {
+        o.fixed[k] = true;
+    }
+    o
+}
+
+#[test]
+fn bounded_linear_least_squares() {
+    // r = x - target for the six shape parameters; targets outside the box end on the bound.
+    fn r(t: &[f64; 9]) -> (Vec<f64>, Vec<[f64; 9]>) {
+        let target = [0.5, 3.0, -1.0, 2.0, 1.0, 0.05];
+        let mut res = Vec::new();
+        let mut jac = Vec::new();
+        for k in 0..6 {
+            res.push(t[k] - target[k]);
+            let mut row = [0.0; 9];
+            row[k] = 1.0;
+            jac.push(row);
+        }
+        (res, jac)
+    }
+    let bounds = Bounds::new(0.1, 2.0, 4.0, 0.1, 2.0);
+    let mut mock = Mock { residuals: r, seen: Vec::new() };
+    let sol = solve(&mut mock, &[start([1.0; 6])], &bounds, &rotation_fixed()).unwrap().remove(0);
+    let x = sol.candidate.shape.to_array();
+    let expected = [0.5, 2.0, 0.1, 2.0, 1.0, 0.1];
+    for k in 0..6 {
+        assert!((x[k] - expected[k]).abs() < 1e-3, "x[{k}] = {} expected {} ({:?})", x[k], expected[k], sol.stop);
+    }
+}
+
+#[test]
+fn rosenbrock_with_an_active_bound() {
+    // 100(y - x^2)^2 + (1 - x)^2 with x <= 0.5: the minimum is (0.5, 0.25).
+    fn r(t: &[f64; 9]) -> (Vec<f64>, Vec<[f64; 9]>) {
+        let (x, y) = (t[0], t[1]);
+        let mut j1 = [0.0; 9];
+        j1[0] = -20.0 * x;
+        j1[1] = 10.0;
+        let mut j2 = [0.0; 9];
+        j2[0] = -1.0;
+        (vec![10.0 * (y - x * x), 1.0 - x], vec![j1, j2])
+    }
+    let mut bounds = Bounds::new(0.01, 5.0, 4.0, 0.1, 2.0);
+    bounds.upper[0] = 0.5;
+    let mut o = rotation_fixed();
+    for k in 2..6 {
+        o.fixed[k] = true;
+    }
+    let mut mock = Mock { residuals: r, seen: Vec::new() };
+    let sol = solve(&mut mock, &[start([0.05, 2.0, 1.0, 1.0, 1.0, 1.0])], &bounds, &o).unwrap().remove(0);
+    let (x, y) = (sol.candidate.shape.a1, sol.candidate.shape.a2);
+    assert!((x - 0.5).abs() < 1e-3 && (y - 0.25).abs() < 1e-3, "got ({x}, {y}) after {} iterations, {:?}", sol.iterations, sol.stop);
+    assert_ne!(sol.stop, Stop::IterationCap);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    #[test]
+    fn iterates_never_leave_the_bounds(t0 in 0.2f64..1.9, t1 in 0.2f64..1.9, t4 in 0.2f64..1.9) {
+        // a nonlinear problem whose unconstrained minimum lies outside the box
+        fn r(t: &[f64; 9]) -> (Vec<f64>, Vec<[f64; 9]>) {
+            let mut res = Vec::new();
+            let mut jac = Vec::new();
+            for k in 0..6 {
+                res.push(t[k] * t[k] - 9.0 + if k % 2 == 0 { 8.99 } else { 0.0 });
+                let mut row = [0.0; 9];
+                row[k] = 2.0 * t[k];
+                jac.push(row);
+            }
+            (res, jac)
+        }
+        let bounds = Bounds::new(0.1, 2.0, 2.0, 0.1, 2.0);
+        let mut mock = Mock { residuals: r, seen: Vec::new() };
+        solve(&mut mock, &[start([t0, t1, 1.0, 1.0, t4, 1.0])], &bounds, &rotation_fixed()).unwrap();
+        prop_assert!(!mock.seen.is_empty());
+        for c in &mock.seen {
+            let v = c.shape.to_array();
+            for k in 0..6 {
+                prop_assert!(v[k] > bounds.lower[k] && v[k] < bounds.upper[k], "x[{}] = {} left ({}, {})", k, v[k], bounds.lower[k], bounds.upper[k]);
+            }
+        }
+    }
+}
