@@ -5,7 +5,9 @@
 //!
 //! `cargo bench --bench evaluator`; `SUPERTOROID_BENCH_QUICK=1` keeps N <= 1e5.
 
-use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, SamplingMode, Throughput};
+use criterion::{
+    BenchmarkId, Criterion, SamplingMode, Throughput, criterion_group, criterion_main,
+};
 use glam::{DQuat, DVec3};
 use std::time::Duration;
 use supertoroid::eval::*;
@@ -28,10 +30,17 @@ fn bench_normal_equations(c: &mut Criterion) {
     let shape = Shape::new(0.05, 0.04, 0.02, 2.0, 0.8, 1.2);
     let pose = Pose::new(DQuat::from_rotation_x(0.3), DVec3::new(0.1, 0.2, 0.5));
     let quick = std::env::var("SUPERTOROID_BENCH_QUICK").is_ok();
-    let sizes: &[usize] = if quick { &[1_000, 10_000, 100_000] } else { &[1_000, 10_000, 100_000, 1_000_000] };
+    let sizes: &[usize] = if quick {
+        &[1_000, 10_000, 100_000]
+    } else {
+        &[1_000, 10_000, 100_000, 1_000_000]
+    };
     let mut rng = synth::rng(1);
     let mut group = c.benchmark_group("normal_equations");
-    group.sample_size(10).warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(2));
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(2));
     for mut evaluator in evaluators() {
         for &n in sizes {
             let mut world = synth::sample_surface(&shape, &pose, n, &mut rng);
@@ -53,9 +62,11 @@ fn bench_normal_equations(c: &mut Criterion) {
                     group.sampling_mode(SamplingMode::Auto);
                 }
                 group.throughput(Throughput::Elements((n * k) as u64));
-                group.bench_with_input(BenchmarkId::new(format!("{}/K={k}", evaluator.kind()), n), &batch, |b, batch| {
-                    b.iter(|| evaluator.normal_equations(batch, Loss::Squared).unwrap())
-                });
+                group.bench_with_input(
+                    BenchmarkId::new(format!("{}/K={k}", evaluator.kind()), n),
+                    &batch,
+                    |b, batch| b.iter(|| evaluator.normal_equations(batch, Loss::Squared).unwrap()),
+                );
             }
         }
     }

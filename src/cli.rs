@@ -1,9 +1,9 @@
 //! The `supertoroid` command line. Bad input gives one clear line on stderr and exit
 //! code 2; internal failures exit 1.
 
-use crate::eval::{make_evaluator, Backend, Normalization};
+use crate::eval::{Backend, Normalization, make_evaluator};
 use crate::io::{read_cloud, write_cloud};
-use crate::model::{meridian_distance, Pose, Shape};
+use crate::model::{Pose, Shape, meridian_distance};
 use crate::synth::{self, Camera, Intrinsics};
 use clap::{Args, Parser, Subcommand};
 use std::io::Write;
@@ -71,7 +71,10 @@ pub struct ShapePoseArgs {
 
 impl ShapePoseArgs {
     fn parse(&self) -> Result<(Shape, Pose), String> {
-        Ok((Shape::parse(&self.shape)?, Pose::parse(self.translation.as_deref(), self.quaternion.as_deref())?))
+        Ok((
+            Shape::parse(&self.shape)?,
+            Pose::parse(self.translation.as_deref(), self.quaternion.as_deref())?,
+        ))
     }
 }
 
@@ -119,7 +122,10 @@ pub struct Failure {
 
 impl Failure {
     pub fn input(message: impl Into<String>) -> Self {
-        Self { code: 2, message: message.into() }
+        Self {
+            code: 2,
+            message: message.into(),
+        }
     }
 }
 
@@ -178,31 +184,58 @@ fn sample(args: SampleArgs) -> Result<(), Failure> {
 
 fn distance(args: DistanceArgs) -> Result<(), Failure> {
     let (shape, pose) = args.object.parse().map_err(Failure::input)?;
-    let points = read_cloud(&args.file).map_err(|e| Failure::input(format!("{}: {e}", args.file.display())))?;
-    let backend = args.backend.or_else(Backend::from_env).unwrap_or(Backend::Cpu);
+    let points = read_cloud(&args.file)
+        .map_err(|e| Failure::input(format!("{}: {e}", args.file.display())))?;
+    let backend = args
+        .backend
+        .or_else(Backend::from_env)
+        .unwrap_or(Backend::Cpu);
     let distances: Vec<f64> = if backend == Backend::Cpu {
-        points.iter().map(|p| meridian_distance(&shape, pose.to_canonical(*p)).distance).collect()
+        points
+            .iter()
+            .map(|p| meridian_distance(&shape, pose.to_canonical(*p)).distance)
+            .collect()
     } else {
-        let mut evaluator = make_evaluator(backend).map_err(|e| Failure { code: 1, message: e.to_string() })?;
+        let mut evaluator = make_evaluator(backend).map_err(|e| Failure {
+            code: 1,
+            message: e.to_string(),
+        })?;
         let norm = Normalization::of(&points);
-        evaluator.set_points(&norm.points(&points)).map_err(|e| Failure { code: 1, message: e.to_string() })?;
+        evaluator
+            .set_points(&norm.points(&points))
+            .map_err(|e| Failure {
+                code: 1,
+                message: e.to_string(),
+            })?;
         let r = evaluator
             .residuals(&[norm.candidate(&shape, &pose)])
-            .map_err(|e| Failure { code: 1, message: e.to_string() })?;
+            .map_err(|e| Failure {
+                code: 1,
+                message: e.to_string(),
+            })?;
         r.into_iter().map(|r| (r * norm.scale).abs()).collect()
     };
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     for d in distances {
-        writeln!(out, "{d}").map_err(|e| Failure { code: 1, message: e.to_string() })?;
+        writeln!(out, "{d}").map_err(|e| Failure {
+            code: 1,
+            message: e.to_string(),
+        })?;
     }
-    out.flush().map_err(|e| Failure { code: 1, message: e.to_string() })
+    out.flush().map_err(|e| Failure {
+        code: 1,
+        message: e.to_string(),
+    })
 }
 
 fn fit(args: FitArgs) -> Result<(), Failure> {
-    let points = read_cloud(&args.file).map_err(|e| Failure::input(format!("{}: {e}", args.file.display())))?;
+    let points = read_cloud(&args.file)
+        .map_err(|e| Failure::input(format!("{}: {e}", args.file.display())))?;
     let known_axis = match &args.axis {
-        Some(a) => Some(glam::DVec3::from_array(crate::model::parse_floats::<3>(a, "axis x,y,z").map_err(Failure::input)?)),
+        Some(a) => Some(glam::DVec3::from_array(
+            crate::model::parse_floats::<3>(a, "axis x,y,z").map_err(Failure::input)?,
+        )),
         None => None,
     };
     let options = crate::fit::FitOptions {
@@ -212,12 +245,27 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         known_axis,
         ..Default::default()
     };
-    let backend = args.backend.or_else(Backend::from_env).unwrap_or(Backend::Auto);
-    let mut evaluator = make_evaluator(backend).map_err(|e| Failure { code: 1, message: e.to_string() })?;
+    let backend = args
+        .backend
+        .or_else(Backend::from_env)
+        .unwrap_or(Backend::Auto);
+    let mut evaluator = make_evaluator(backend).map_err(|e| Failure {
+        code: 1,
+        message: e.to_string(),
+    })?;
     let report = crate::fit::fit(evaluator.as_mut(), &points, &options).map_err(|e| match e {
-        crate::fit::FitError::Evaluator(m) => Failure { code: 1, message: m },
+        crate::fit::FitError::Evaluator(m) => Failure {
+            code: 1,
+            message: m,
+        },
         other => Failure::input(other.to_string()),
     })?;
-    println!("{}", serde_json::to_string_pretty(&report).map_err(|e| Failure { code: 1, message: e.to_string() })?);
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&report).map_err(|e| Failure {
+            code: 1,
+            message: e.to_string()
+        })?
+    );
     Ok(())
 }

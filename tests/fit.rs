@@ -3,7 +3,7 @@
 use glam::DVec3;
 use supertoroid::eval::*;
 use supertoroid::fit::ground_truth::{compare, make_case};
-use supertoroid::fit::{fit, FitError, FitOptions};
+use supertoroid::fit::{FitError, FitOptions, fit};
 
 /// Full clouds, noise 0-2% of the size, 0-10% outliers: a seeded CI subset of the suite.
 /// Measured when this test was written: 10 of 12 (the target of issue 4 is 98%; partial
@@ -18,28 +18,59 @@ fn full_clouds_are_recovered_within_the_ground_truth_bounds() {
         let noise = [0.0, 0.01, 0.02][i % 3];
         let outliers = [0.0, 0.05, 0.1][(i / 3) % 3];
         let case = make_case(seed, false, noise, outliers);
-        let report = fit(&mut evaluator, &case.points, &FitOptions { seed, ..Default::default() }).unwrap();
-        let e = compare((&case.shape, &case.pose), (&report.fitted.0, &report.fitted.1));
-        eprintln!("case {seed}: noise {noise} outliers {outliers}: {e:?} -> {}", e.success());
+        let report = fit(
+            &mut evaluator,
+            &case.points,
+            &FitOptions {
+                seed,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let e = compare(
+            (&case.shape, &case.pose),
+            (&report.fitted.0, &report.fitted.1),
+        );
+        eprintln!(
+            "case {seed}: noise {noise} outliers {outliers}: {e:?} -> {}",
+            e.success()
+        );
         if e.success() {
             successes += 1;
         }
     }
-    assert!(successes >= 10, "only {successes} of {cases} full clouds recovered");
+    assert!(
+        successes >= 10,
+        "only {successes} of {cases} full clouds recovered"
+    );
 }
 
 #[test]
 fn gpu_and_cpu_fits_agree_on_a_clean_cloud() {
-    let ctx = GpuContext::shared(&AdapterChoice::from_env()).expect("a GPU adapter (lavapipe in CI)");
+    let ctx =
+        GpuContext::shared(&AdapterChoice::from_env()).expect("a GPU adapter (lavapipe in CI)");
     let case = make_case(100, false, 0.005, 0.0);
-    let cpu = fit(&mut CpuEvaluator::new(), &case.points, &FitOptions::default()).unwrap();
-    let gpu = fit(&mut GpuEvaluator::new(ctx), &case.points, &FitOptions::default()).unwrap();
+    let cpu = fit(
+        &mut CpuEvaluator::new(),
+        &case.points,
+        &FitOptions::default(),
+    )
+    .unwrap();
+    let gpu = fit(
+        &mut GpuEvaluator::new(ctx),
+        &case.points,
+        &FitOptions::default(),
+    )
+    .unwrap();
     let e_cpu = compare((&case.shape, &case.pose), (&cpu.fitted.0, &cpu.fitted.1));
     let e_gpu = compare((&case.shape, &case.pose), (&gpu.fitted.0, &gpu.fitted.1));
     assert!(e_cpu.success(), "{e_cpu:?}");
     assert!(e_gpu.success(), "{e_gpu:?}");
     assert_eq!(gpu.backend.kind, "gpu");
-    assert!((cpu.quality.rms_distance - gpu.quality.rms_distance).abs() < 0.2 * cpu.quality.rms_distance);
+    assert!(
+        (cpu.quality.rms_distance - gpu.quality.rms_distance).abs()
+            < 0.2 * cpu.quality.rms_distance
+    );
 }
 
 #[test]
@@ -47,16 +78,32 @@ fn bad_clouds_are_rejected_with_a_reason() {
     let mut ev = CpuEvaluator::new();
     let o = FitOptions::default();
     let few: Vec<DVec3> = (0..5).map(|i| DVec3::new(i as f64, 1.0, 2.0)).collect();
-    assert_eq!(fit(&mut ev, &few, &o).unwrap_err(), FitError::TooFewPoints(5));
+    assert_eq!(
+        fit(&mut ev, &few, &o).unwrap_err(),
+        FitError::TooFewPoints(5)
+    );
     let mut nan = make_case(1, false, 0.0, 0.0).points;
     nan[17].y = f64::NAN;
     assert_eq!(fit(&mut ev, &nan, &o).unwrap_err(), FitError::NonFinite(17));
-    let planar: Vec<DVec3> = (0..500).map(|i| DVec3::new((i % 25) as f64, (i / 25) as f64, 3.0)).collect();
-    assert_eq!(fit(&mut ev, &planar, &o).unwrap_err(), FitError::Degenerate("planar"));
-    let line: Vec<DVec3> = (0..500).map(|i| DVec3::new(i as f64, 2.0 * i as f64, -(i as f64))).collect();
-    assert_eq!(fit(&mut ev, &line, &o).unwrap_err(), FitError::Degenerate("collinear"));
+    let planar: Vec<DVec3> = (0..500)
+        .map(|i| DVec3::new((i % 25) as f64, (i / 25) as f64, 3.0))
+        .collect();
+    assert_eq!(
+        fit(&mut ev, &planar, &o).unwrap_err(),
+        FitError::Degenerate("planar")
+    );
+    let line: Vec<DVec3> = (0..500)
+        .map(|i| DVec3::new(i as f64, 2.0 * i as f64, -(i as f64)))
+        .collect();
+    assert_eq!(
+        fit(&mut ev, &line, &o).unwrap_err(),
+        FitError::Degenerate("collinear")
+    );
     let same = vec![DVec3::ONE; 100];
-    assert!(matches!(fit(&mut ev, &same, &o).unwrap_err(), FitError::Degenerate(_)));
+    assert!(matches!(
+        fit(&mut ev, &same, &o).unwrap_err(),
+        FitError::Degenerate(_)
+    ));
 }
 
 #[test]
@@ -65,28 +112,76 @@ fn cli_fit_prints_every_documented_field() {
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("mug.xyz");
     let case = make_case(4, false, 0.005, 0.0);
-    let text: String = case.points.iter().map(|p| format!("{} {} {}\n", p.x, p.y, p.z)).collect();
+    let text: String = case
+        .points
+        .iter()
+        .map(|p| format!("{} {} {}\n", p.x, p.y, p.z))
+        .collect();
     std::fs::write(&file, text).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_supertoroid")).args(["fit", "--backend", "cpu", "--seed", "3"]).arg(&file).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_supertoroid"))
+        .args(["fit", "--backend", "cpu", "--seed", "3"])
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     for path in [
-        "/shape/a1", "/shape/a2", "/shape/a3", "/shape/a4", "/shape/eps1", "/shape/eps2",
-        "/pose/translation/2", "/pose/rotation/2/2", "/pose/quaternion_wxyz/3",
-        "/quality/rms_distance", "/quality/median_distance", "/quality/relative_rms", "/quality/inlier_fraction",
-        "/timing_ms/stage1", "/timing_ms/stage2", "/timing_ms/total", "/iterations/stage1", "/iterations/stage2",
-        "/backend/kind", "/backend/adapter", "/points/input", "/points/stage1", "/points/stage2",
+        "/shape/a1",
+        "/shape/a2",
+        "/shape/a3",
+        "/shape/a4",
+        "/shape/eps1",
+        "/shape/eps2",
+        "/pose/translation/2",
+        "/pose/rotation/2/2",
+        "/pose/quaternion_wxyz/3",
+        "/quality/rms_distance",
+        "/quality/median_distance",
+        "/quality/relative_rms",
+        "/quality/inlier_fraction",
+        "/timing_ms/stage1",
+        "/timing_ms/stage2",
+        "/timing_ms/total",
+        "/iterations/stage1",
+        "/iterations/stage2",
+        "/backend/kind",
+        "/backend/adapter",
+        "/points/input",
+        "/points/stage1",
+        "/points/stage2",
     ] {
         assert!(json.pointer(path).is_some(), "missing {path} in {json}");
     }
     assert_eq!(json.pointer("/points/input").unwrap().as_u64(), Some(2000));
-    let t = json.pointer("/pose/translation").unwrap().as_array().unwrap();
-    let centre = DVec3::new(t[0].as_f64().unwrap(), t[1].as_f64().unwrap(), t[2].as_f64().unwrap());
+    let t = json
+        .pointer("/pose/translation")
+        .unwrap()
+        .as_array()
+        .unwrap();
+    let centre = DVec3::new(
+        t[0].as_f64().unwrap(),
+        t[1].as_f64().unwrap(),
+        t[2].as_f64().unwrap(),
+    );
     assert!((centre - case.pose.translation).length() < 0.05 * case.shape.size());
     // a planar cloud: exit code 2 and one line naming the problem
     let flat = dir.join("flat.xyz");
-    std::fs::write(&flat, (0..100).map(|i| format!("{} {} 0\n", i % 10, i / 10)).collect::<String>()).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_supertoroid")).args(["fit", "--backend", "cpu"]).arg(&flat).output().unwrap();
+    std::fs::write(
+        &flat,
+        (0..100)
+            .map(|i| format!("{} {} 0\n", i % 10, i / 10))
+            .collect::<String>(),
+    )
+    .unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_supertoroid"))
+        .args(["fit", "--backend", "cpu"])
+        .arg(&flat)
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("planar"));
 }

@@ -6,7 +6,7 @@ use glam::{DQuat, DVec3};
 use rand::Rng;
 use std::sync::Arc;
 use supertoroid::eval::*;
-use supertoroid::model::{meridian_distance, Pose, Shape};
+use supertoroid::model::{Pose, Shape, meridian_distance};
 use supertoroid::synth;
 
 fn context() -> Arc<GpuContext> {
@@ -33,17 +33,30 @@ fn random_shape(rng: &mut impl Rng) -> Shape {
         rng.random_range(0.3..1.5),
         rng.random_range(0.3..1.5),
         rng.random_range(0.2..1.0),
-        if rng.random_bool(0.2) { 0.0 } else { rng.random_range(0.0..3.0) },
+        if rng.random_bool(0.2) {
+            0.0
+        } else {
+            rng.random_range(0.0..3.0)
+        },
         eps(&mut r),
         eps(&mut r),
     )
 }
 
 fn random_pose(rng: &mut impl Rng) -> Pose {
-    let axis = DVec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)).normalize_or(DVec3::Z);
+    let axis = DVec3::new(
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+    )
+    .normalize_or(DVec3::Z);
     Pose::new(
         DQuat::from_axis_angle(axis, rng.random_range(-3.0..3.0)),
-        DVec3::new(rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5), rng.random_range(-0.5..0.5)),
+        DVec3::new(
+            rng.random_range(-0.5..0.5),
+            rng.random_range(-0.5..0.5),
+            rng.random_range(-0.5..0.5),
+        ),
     )
 }
 
@@ -67,10 +80,18 @@ fn points_around(shape: &Shape, pose: &Pose, n: usize, rng: &mut impl Rng) -> Ve
                     // 1% of the size from the section centre: closer, the distance's jump
                     // across the centre (it is direction-dependent there) amplifies f32
                     // rounding of G - a4 beyond 1e-4 of the size
-                    let offset = DVec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+                    let offset = DVec3::new(
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                    );
                     DVec3::new(x, y, 0.0) + offset.normalize_or(DVec3::Z) * 0.01 * shape.size()
                 }
-                _ => DVec3::new(rng.random_range(-h.x..h.x), rng.random_range(-h.y..h.y), rng.random_range(-h.z..h.z)),
+                _ => DVec3::new(
+                    rng.random_range(-h.x..h.x),
+                    rng.random_range(-h.y..h.y),
+                    rng.random_range(-h.z..h.z),
+                ),
             };
             pose.to_world(c)
         })
@@ -84,10 +105,14 @@ fn every_shader_validates_with_naga() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "wgsl") {
             let source = std::fs::read_to_string(&path).unwrap();
-            let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("{}: {}", path.display(), e.emit_to_string(&source)));
-            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-                .validate(&module)
-                .unwrap_or_else(|e| panic!("{}: {e:?}", path.display()));
+            let module = naga::front::wgsl::parse_str(&source)
+                .unwrap_or_else(|e| panic!("{}: {}", path.display(), e.emit_to_string(&source)));
+            naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::empty(),
+            )
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{}: {e:?}", path.display()));
             count += 1;
         }
     }
@@ -110,7 +135,12 @@ fn gpu_residuals_match_the_f64_evaluator() {
             let exact = meridian_distance(&shape, pose.to_canonical(*p)).signed;
             let err = (r_gpu * norm.scale - exact).abs() / shape.size();
             worst = worst.max(err);
-            assert!(err <= 1e-4, "gpu {} vs f64 {exact} ({shape:?}, canonical {})", r_gpu * norm.scale, pose.to_canonical(*p));
+            assert!(
+                err <= 1e-4,
+                "gpu {} vs f64 {exact} ({shape:?}, canonical {})",
+                r_gpu * norm.scale,
+                pose.to_canonical(*p)
+            );
         }
     }
     eprintln!("worst residual error / size = {worst:e}");
@@ -143,9 +173,16 @@ fn gpu_jacobian_matches_central_differences() {
         if shape.eps1 < 0.3 || shape.eps2 < 0.3 {
             continue; // f32 rounding of x^(2/eps) dominates the finite differences there
         }
-        let c = Candidate { shape, pose: random_pose(&mut rng) };
+        let c = Candidate {
+            shape,
+            pose: random_pose(&mut rng),
+        };
         let h3 = shape.half_extents() * 1.5;
-        let q = DVec3::new(rng.random_range(-h3.x..h3.x), rng.random_range(-h3.y..h3.y), rng.random_range(-h3.z..h3.z));
+        let q = DVec3::new(
+            rng.random_range(-h3.x..h3.x),
+            rng.random_range(-h3.y..h3.y),
+            rng.random_range(-h3.z..h3.z),
+        );
         let m = meridian_distance(&shape, q);
         // differentiable region: off the axis, off the section centre, residual not ~0
         if q.x.hypot(q.y) < 0.05 || m.beta1 > 10.0 || m.signed.abs() < 0.02 {
@@ -158,11 +195,20 @@ fn gpu_jacobian_matches_central_differences() {
         let r = m.signed;
         let jac: Vec<f64> = ne.jtr.iter().map(|v| v / r).collect();
         let h = 1e-6;
-        let fd: Vec<f64> = (0..NUM_PARAMS).map(|k| (perturbed_residual(&c, p, k, h) - perturbed_residual(&c, p, k, -h)) / (2.0 * h)).collect();
+        let fd: Vec<f64> = (0..NUM_PARAMS)
+            .map(|k| {
+                (perturbed_residual(&c, p, k, h) - perturbed_residual(&c, p, k, -h)) / (2.0 * h)
+            })
+            .collect();
         let scale = fd.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         for k in 0..NUM_PARAMS {
             let tol = 1e-2 * fd[k].abs().max(1e-2 * scale);
-            assert!((jac[k] - fd[k]).abs() <= tol, "column {k}: gpu {} vs fd {} ({shape:?}, q = {q})", jac[k], fd[k]);
+            assert!(
+                (jac[k] - fd[k]).abs() <= tol,
+                "column {k}: gpu {} vs fd {} ({shape:?}, q = {q})",
+                jac[k],
+                fd[k]
+            );
         }
         checked += 1;
     }
@@ -170,14 +216,29 @@ fn gpu_jacobian_matches_central_differences() {
 
 fn compare_normal_equations(a: &NormalEquations, b: &NormalEquations, tol: f64) {
     assert_eq!(a.count, b.count);
-    assert!((a.cost - b.cost).abs() <= tol * b.cost.abs().max(1e-12), "cost {} vs {}", a.cost, b.cost);
+    assert!(
+        (a.cost - b.cost).abs() <= tol * b.cost.abs().max(1e-12),
+        "cost {} vs {}",
+        a.cost,
+        b.cost
+    );
     for i in 0..NUM_PARAMS {
         for j in 0..NUM_PARAMS {
             let s = (b.jtj[i][i] * b.jtj[j][j]).sqrt().max(1e-12);
-            assert!((a.jtj[i][j] - b.jtj[i][j]).abs() <= tol * s, "JtJ[{i}][{j}] {} vs {}", a.jtj[i][j], b.jtj[i][j]);
+            assert!(
+                (a.jtj[i][j] - b.jtj[i][j]).abs() <= tol * s,
+                "JtJ[{i}][{j}] {} vs {}",
+                a.jtj[i][j],
+                b.jtj[i][j]
+            );
         }
         let s = (b.jtj[i][i] * 2.0 * b.cost).sqrt().max(1e-12);
-        assert!((a.jtr[i] - b.jtr[i]).abs() <= tol * s, "Jtr[{i}] {} vs {}", a.jtr[i], b.jtr[i]);
+        assert!(
+            (a.jtr[i] - b.jtr[i]).abs() <= tol * s,
+            "Jtr[{i}] {} vs {}",
+            a.jtr[i],
+            b.jtr[i]
+        );
     }
 }
 
@@ -210,7 +271,12 @@ fn normal_equations_and_costs_match_the_cpu_for_1e3_and_1e6_points() {
             let gc = gpu.costs(&[truth, off], loss).unwrap();
             for (a, b) in gc.iter().zip(&c) {
                 assert_eq!(a.count, b.count);
-                assert!((a.cost - b.cost).abs() <= 2e-3 * b.cost, "cost-only kernel {} vs {}", a.cost, b.cost);
+                assert!(
+                    (a.cost - b.cost).abs() <= 2e-3 * b.cost,
+                    "cost-only kernel {} vs {}",
+                    a.cost,
+                    b.cost
+                );
             }
         }
     }
@@ -224,11 +290,23 @@ fn a_batch_of_candidates_equals_single_evaluations_and_is_reproducible() {
     let pose = random_pose(&mut rng);
     let pts = synth::sample_surface(&shape, &pose, 5000, &mut rng);
     gpu.set_points(&pts).unwrap();
-    let batch: Vec<Candidate> = (0..8).map(|_| Candidate { shape: random_shape(&mut rng), pose: random_pose(&mut rng) }).collect();
+    let batch: Vec<Candidate> = (0..8)
+        .map(|_| Candidate {
+            shape: random_shape(&mut rng),
+            pose: random_pose(&mut rng),
+        })
+        .collect();
     let together = gpu.normal_equations(&batch, Loss::Huber(0.05)).unwrap();
-    assert_eq!(together, gpu.normal_equations(&batch, Loss::Huber(0.05)).unwrap(), "not reproducible");
+    assert_eq!(
+        together,
+        gpu.normal_equations(&batch, Loss::Huber(0.05)).unwrap(),
+        "not reproducible"
+    );
     for (c, b) in batch.iter().zip(&together) {
-        let single = gpu.normal_equations(std::slice::from_ref(c), Loss::Huber(0.05)).unwrap().remove(0);
+        let single = gpu
+            .normal_equations(std::slice::from_ref(c), Loss::Huber(0.05))
+            .unwrap()
+            .remove(0);
         compare_normal_equations(&single, b, 1e-5);
     }
     let costs = gpu.costs(&batch, Loss::Squared).unwrap();
@@ -246,10 +324,16 @@ fn padding_and_non_finite_points_are_not_counted() {
     let mut pts = synth::sample_surface(&shape, &Pose::IDENTITY, 100, &mut synth::rng(1));
     pts.push(DVec3::new(f64::NAN, 0.0, 0.0));
     gpu.set_points(&pts).unwrap();
-    let c = Candidate { shape, pose: Pose::IDENTITY };
+    let c = Candidate {
+        shape,
+        pose: Pose::IDENTITY,
+    };
     let ne = gpu.normal_equations(&[c], Loss::Squared).unwrap().remove(0);
     assert_eq!(ne.count, 100);
     assert!(ne.cost < 1e-8);
     let mut empty = GpuEvaluator::new(context());
-    assert!(matches!(empty.costs(&[c], Loss::Squared), Err(EvalError::NoPoints)));
+    assert!(matches!(
+        empty.costs(&[c], Loss::Squared),
+        Err(EvalError::NoPoints)
+    ));
 }

@@ -5,7 +5,7 @@ use glam::DVec3;
 use proptest::prelude::*;
 use supertoroid::eval::*;
 use supertoroid::model::{Pose, Shape};
-use supertoroid::solve::{solve, Bounds, SolverOptions, Stop};
+use supertoroid::solve::{Bounds, SolverOptions, Stop, solve};
 
 /// Residuals r(theta) of the first nine parameters (shape, translation) with their Jacobian.
 struct Mock {
@@ -20,45 +20,74 @@ fn theta(c: &Candidate) -> [f64; 9] {
 }
 
 impl Evaluator for Mock {
-    fn kind(&self) -> &'static str { "mock" }
-    fn device_name(&self) -> String { "mock".into() }
-    fn set_points(&mut self, _: &[DVec3]) -> Result<(), EvalError> { Ok(()) }
-    fn normal_equations(&mut self, cs: &[Candidate], loss: Loss) -> Result<Vec<NormalEquations>, EvalError> {
+    fn kind(&self) -> &'static str {
+        "mock"
+    }
+    fn device_name(&self) -> String {
+        "mock".into()
+    }
+    fn set_points(&mut self, _: &[DVec3]) -> Result<(), EvalError> {
+        Ok(())
+    }
+    fn normal_equations(
+        &mut self,
+        cs: &[Candidate],
+        loss: Loss,
+    ) -> Result<Vec<NormalEquations>, EvalError> {
         self.seen.extend_from_slice(cs);
-        Ok(cs.iter().map(|c| {
-            let (r, j) = (self.residuals)(&theta(c));
-            let mut ne = NormalEquations::zero();
-            for (ri, ji) in r.iter().zip(&j) {
-                let (rho, w) = loss.eval(*ri);
-                for a in 0..9 {
-                    for b in 0..9 {
-                        ne.jtj[a][b] += w * ji[a] * ji[b];
+        Ok(cs
+            .iter()
+            .map(|c| {
+                let (r, j) = (self.residuals)(&theta(c));
+                let mut ne = NormalEquations::zero();
+                for (ri, ji) in r.iter().zip(&j) {
+                    let (rho, w) = loss.eval(*ri);
+                    for a in 0..9 {
+                        for b in 0..9 {
+                            ne.jtj[a][b] += w * ji[a] * ji[b];
+                        }
+                        ne.jtr[a] += w * ji[a] * ri;
                     }
-                    ne.jtr[a] += w * ji[a] * ri;
+                    ne.cost += rho;
+                    ne.count += 1;
                 }
-                ne.cost += rho;
-                ne.count += 1;
-            }
-            ne
-        }).collect())
+                ne
+            })
+            .collect())
     }
     fn costs(&mut self, cs: &[Candidate], loss: Loss) -> Result<Vec<Cost>, EvalError> {
-        Ok(cs.iter().map(|c| {
-            let (r, _) = (self.residuals)(&theta(c));
-            Cost { cost: r.iter().map(|x| loss.eval(*x).0).sum(), count: r.len() as u64 }
-        }).collect())
+        Ok(cs
+            .iter()
+            .map(|c| {
+                let (r, _) = (self.residuals)(&theta(c));
+                Cost {
+                    cost: r.iter().map(|x| loss.eval(*x).0).sum(),
+                    count: r.len() as u64,
+                }
+            })
+            .collect())
     }
     fn residuals(&mut self, cs: &[Candidate]) -> Result<Vec<f64>, EvalError> {
-        Ok(cs.iter().flat_map(|c| (self.residuals)(&theta(c)).0).collect())
+        Ok(cs
+            .iter()
+            .flat_map(|c| (self.residuals)(&theta(c)).0)
+            .collect())
     }
 }
 
 fn start(v: [f64; 6]) -> Candidate {
-    Candidate { shape: Shape::from_array(v), pose: Pose::new(glam::DQuat::IDENTITY, DVec3::ZERO) }
+    Candidate {
+        shape: Shape::from_array(v),
+        pose: Pose::new(glam::DQuat::IDENTITY, DVec3::ZERO),
+    }
 }
 
 fn rotation_fixed() -> SolverOptions {
-    let mut o = SolverOptions { max_iterations: 200, cost_tolerance: 1e-12, ..Default::default() };
+    let mut o = SolverOptions {
+        max_iterations: 200,
+        cost_tolerance: 1e-12,
+        ..Default::default()
+    };
     for k in 6..12 {
         o.fixed[k] = true;
     }
@@ -81,12 +110,23 @@ fn bounded_linear_least_squares() {
         (res, jac)
     }
     let bounds = Bounds::new(0.1, 2.0, 4.0, 0.1, 2.0);
-    let mut mock = Mock { residuals: r, seen: Vec::new() };
-    let sol = solve(&mut mock, &[start([1.0; 6])], &bounds, &rotation_fixed()).unwrap().remove(0);
+    let mut mock = Mock {
+        residuals: r,
+        seen: Vec::new(),
+    };
+    let sol = solve(&mut mock, &[start([1.0; 6])], &bounds, &rotation_fixed())
+        .unwrap()
+        .remove(0);
     let x = sol.candidate.shape.to_array();
     let expected = [0.5, 2.0, 0.1, 2.0, 1.0, 0.1];
     for k in 0..6 {
-        assert!((x[k] - expected[k]).abs() < 1e-3, "x[{k}] = {} expected {} ({:?})", x[k], expected[k], sol.stop);
+        assert!(
+            (x[k] - expected[k]).abs() < 1e-3,
+            "x[{k}] = {} expected {} ({:?})",
+            x[k],
+            expected[k],
+            sol.stop
+        );
     }
 }
 
@@ -108,10 +148,25 @@ fn rosenbrock_with_an_active_bound() {
     for k in 2..6 {
         o.fixed[k] = true;
     }
-    let mut mock = Mock { residuals: r, seen: Vec::new() };
-    let sol = solve(&mut mock, &[start([0.05, 2.0, 1.0, 1.0, 1.0, 1.0])], &bounds, &o).unwrap().remove(0);
+    let mut mock = Mock {
+        residuals: r,
+        seen: Vec::new(),
+    };
+    let sol = solve(
+        &mut mock,
+        &[start([0.05, 2.0, 1.0, 1.0, 1.0, 1.0])],
+        &bounds,
+        &o,
+    )
+    .unwrap()
+    .remove(0);
     let (x, y) = (sol.candidate.shape.a1, sol.candidate.shape.a2);
-    assert!((x - 0.5).abs() < 1e-3 && (y - 0.25).abs() < 1e-3, "got ({x}, {y}) after {} iterations, {:?}", sol.iterations, sol.stop);
+    assert!(
+        (x - 0.5).abs() < 1e-3 && (y - 0.25).abs() < 1e-3,
+        "got ({x}, {y}) after {} iterations, {:?}",
+        sol.iterations,
+        sol.stop
+    );
     assert_ne!(sol.stop, Stop::IterationCap);
 }
 

@@ -1,12 +1,15 @@
 //! Synthetic clouds: surface sampling, the single-view renderer and its depth image.
 
 use glam::{DQuat, DVec3};
-use supertoroid::model::{meridian_distance, Pose, Shape};
+use supertoroid::model::{Pose, Shape, meridian_distance};
 use supertoroid::synth::{self, Camera, Intrinsics};
 
 fn mug() -> (Shape, Pose) {
     let shape = Shape::new(0.05, 0.04, 0.03, 2.0, 0.6, 1.3);
-    let pose = Pose::new(DQuat::from_euler(glam::EulerRot::XYZ, 0.4, -0.3, 1.0), DVec3::new(0.1, -0.2, 0.6));
+    let pose = Pose::new(
+        DQuat::from_euler(glam::EulerRot::XYZ, 0.4, -0.3, 1.0),
+        DVec3::new(0.1, -0.2, 0.6),
+    );
     (shape, pose)
 }
 
@@ -32,7 +35,10 @@ fn surface_samples_are_spread_by_area() {
     let pts = synth::sample_surface(&shape, &Pose::IDENTITY, 40_000, &mut synth::rng(3));
     let outer = pts.iter().filter(|p| p.x.hypot(p.y) > a4).count() as f64 / pts.len() as f64;
     let expected = (std::f64::consts::PI * a4 + 2.0) / (2.0 * std::f64::consts::PI * a4);
-    assert!((outer - expected).abs() < 0.01, "outer fraction {outer}, expected {expected}");
+    assert!(
+        (outer - expected).abs() < 0.01,
+        "outer fraction {outer}, expected {expected}"
+    );
     // and evenly around the axis
     let quadrant = pts.iter().filter(|p| p.x > 0.0 && p.y > 0.0).count() as f64 / pts.len() as f64;
     assert!((quadrant - 0.25).abs() < 0.01);
@@ -46,7 +52,12 @@ fn noise_and_outliers_have_the_requested_size() {
     let mut noisy = clean.clone();
     let sigma = 0.01 * shape.size();
     synth::add_noise(&mut noisy, sigma, &mut rng);
-    let var: f64 = clean.iter().zip(&noisy).map(|(a, b)| (*a - *b).length_squared()).sum::<f64>() / (3.0 * clean.len() as f64);
+    let var: f64 = clean
+        .iter()
+        .zip(&noisy)
+        .map(|(a, b)| (*a - *b).length_squared())
+        .sum::<f64>()
+        / (3.0 * clean.len() as f64);
     assert!((var.sqrt() / sigma - 1.0).abs() < 0.05);
     let mut with_outliers = clean.clone();
     synth::add_outliers(&mut with_outliers, &shape, &pose, 0.1, &mut rng);
@@ -61,11 +72,22 @@ fn noise_and_outliers_have_the_requested_size() {
 #[test]
 fn rendered_points_face_the_camera_are_unoccluded_and_match_the_depth_image() {
     let (shape, pose) = mug();
-    let intrinsics = Intrinsics { fx: 300.0, fy: 300.0, cx: 79.5, cy: 59.5, width: 160, height: 120 };
+    let intrinsics = Intrinsics {
+        fx: 300.0,
+        fy: 300.0,
+        cx: 79.5,
+        cy: 59.5,
+        width: 160,
+        height: 120,
+    };
     for seed in 0..4u64 {
         let camera = Camera::random_view(&shape, &pose, intrinsics, &mut synth::rng(seed));
         let view = synth::render_view(&shape, &pose, &camera, 1e-4).unwrap();
-        assert!(view.points.len() > 500, "only {} points seen", view.points.len());
+        assert!(
+            view.points.len() > 500,
+            "only {} points seen",
+            view.points.len()
+        );
         let eye = camera.pose.translation;
         let eye_c = pose.to_canonical(eye);
         for p in &view.points {
@@ -92,7 +114,10 @@ fn rendered_points_face_the_camera_are_unoccluded_and_match_the_depth_image() {
         assert_eq!(from_depth.len(), view.points.len());
         for (cam_point, world) in from_depth.iter().zip(&view.points) {
             let expected = camera.pose.to_canonical(*world);
-            assert!((*cam_point - expected).length() < 1e-4, "{cam_point} vs {expected}");
+            assert!(
+                (*cam_point - expected).length() < 1e-4,
+                "{cam_point} vs {expected}"
+            );
         }
         // every pixel with depth has exactly one point, in row-major order
         let lit = view.depth.data.iter().filter(|&&d| d != 0).count();
@@ -107,6 +132,11 @@ fn renderer_rejects_bad_input() {
     k.fx = 0.0;
     let camera = Camera::look_at(k, DVec3::new(0.0, 0.0, -1.0), DVec3::ZERO, DVec3::Y);
     assert!(synth::render_view(&shape, &pose, &camera, 0.001).is_err());
-    let camera = Camera::look_at(Intrinsics::REALSENSE_640X480, DVec3::new(0.0, 0.0, -1.0), DVec3::ZERO, DVec3::Y);
+    let camera = Camera::look_at(
+        Intrinsics::REALSENSE_640X480,
+        DVec3::new(0.0, 0.0, -1.0),
+        DVec3::ZERO,
+        DVec3::Y,
+    );
     assert!(synth::render_view(&shape, &pose, &camera, 0.0).is_err());
 }

@@ -1,4 +1,4 @@
-use super::{Candidate, Cost, EvalError, Evaluator, Loss, NormalEquations, NUM_PARAMS};
+use super::{Candidate, Cost, EvalError, Evaluator, Loss, NUM_PARAMS, NormalEquations};
 use crate::model::{meridian_distance, meridian_residual_with_gradient};
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -43,7 +43,11 @@ impl Evaluator for CpuEvaluator {
         Ok(())
     }
 
-    fn normal_equations(&mut self, candidates: &[Candidate], loss: Loss) -> Result<Vec<NormalEquations>, EvalError> {
+    fn normal_equations(
+        &mut self,
+        candidates: &[Candidate],
+        loss: Loss,
+    ) -> Result<Vec<NormalEquations>, EvalError> {
         if self.points.is_empty() {
             return Err(EvalError::NoPoints);
         }
@@ -108,8 +112,13 @@ impl Evaluator for CpuEvaluator {
                     .points
                     .par_iter()
                     .map(|p| {
-                        let r = meridian_distance(&c.shape, inverse * (*p - c.pose.translation)).signed;
-                        if r.is_finite() { (loss.eval(r).0, 1u64) } else { (0.0, 0) }
+                        let r =
+                            meridian_distance(&c.shape, inverse * (*p - c.pose.translation)).signed;
+                        if r.is_finite() {
+                            (loss.eval(r).0, 1u64)
+                        } else {
+                            (0.0, 0)
+                        }
                     })
                     .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
                 Cost { cost, count }
@@ -125,7 +134,9 @@ impl Evaluator for CpuEvaluator {
         for c in candidates {
             let inverse = c.pose.rotation.inverse();
             out.par_extend(
-                self.points.par_iter().map(|p| meridian_distance(&c.shape, inverse * (*p - c.pose.translation)).signed),
+                self.points.par_iter().map(|p| {
+                    meridian_distance(&c.shape, inverse * (*p - c.pose.translation)).signed
+                }),
             );
         }
         Ok(out)

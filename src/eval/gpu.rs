@@ -3,7 +3,7 @@
 //! evaluators that keep their storage and staging buffers across iterations, growing
 //! them only when a larger cloud or batch arrives.
 
-use super::{Candidate, Cost, EvalError, Evaluator, Loss, NormalEquations, NUM_PARAMS, NUM_UPPER};
+use super::{Candidate, Cost, EvalError, Evaluator, Loss, NUM_PARAMS, NUM_UPPER, NormalEquations};
 use glam::DVec3;
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -35,7 +35,11 @@ pub struct AdapterChoice {
 impl AdapterChoice {
     /// From `SUPERTOROID_ADAPTER` (a name filter), if set.
     pub fn from_env() -> Self {
-        Self { name_filter: std::env::var("SUPERTOROID_ADAPTER").ok().filter(|s| !s.is_empty()) }
+        Self {
+            name_filter: std::env::var("SUPERTOROID_ADAPTER")
+                .ok()
+                .filter(|s| !s.is_empty()),
+        }
     }
 }
 
@@ -103,7 +107,11 @@ impl GpuContext {
     /// The process's one context, created on first use with `choice`.
     pub fn shared(choice: &AdapterChoice) -> Result<Arc<GpuContext>, EvalError> {
         SHARED
-            .get_or_init(|| GpuContext::new(choice).map(Arc::new).map_err(|e| e.to_string()))
+            .get_or_init(|| {
+                GpuContext::new(choice)
+                    .map(Arc::new)
+                    .map_err(|e| e.to_string())
+            })
             .clone()
             .map_err(EvalError::NoAdapter)
     }
@@ -112,7 +120,8 @@ impl GpuContext {
     /// narrows the backends), opens a device with the adapter's own limits and compiles
     /// the pipelines.
     pub fn new(choice: &AdapterChoice) -> Result<Self, EvalError> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
         let mut adapters = pollster::block_on(instance.enumerate_adapters(backends));
         if let Some(filter) = &choice.name_filter {
@@ -130,7 +139,10 @@ impl GpuContext {
         let limits = adapter.limits();
         let needed = (WG as usize * NE * 4) as u32;
         if limits.max_compute_workgroup_storage_size < needed {
-            return Err(EvalError::NoAdapter(format!("{}: workgroup storage {} < {needed}", info.name, limits.max_compute_workgroup_storage_size)));
+            return Err(EvalError::NoAdapter(format!(
+                "{}: workgroup storage {} < {needed}",
+                info.name, limits.max_compute_workgroup_storage_size
+            )));
         }
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("supertoroid"),
@@ -208,7 +220,10 @@ impl GpuContext {
 
     /// "name (backend, device type)"
     pub fn adapter_name(&self) -> String {
-        format!("{} ({:?}, {:?})", self.info.name, self.info.backend, self.info.device_type)
+        format!(
+            "{} ({:?}, {:?})",
+            self.info.name, self.info.backend, self.info.device_type
+        )
     }
 
     pub fn is_software(&self) -> bool {
@@ -229,13 +244,24 @@ struct Grown {
     capacity: u64,
 }
 
-fn ensure(ctx: &GpuContext, slot: &mut Option<Grown>, bytes: u64, usage: wgpu::BufferUsages, label: &str) -> bool {
+fn ensure(
+    ctx: &GpuContext,
+    slot: &mut Option<Grown>,
+    bytes: u64,
+    usage: wgpu::BufferUsages,
+    label: &str,
+) -> bool {
     let bytes = bytes.max(16);
     if slot.as_ref().is_some_and(|g| g.capacity >= bytes) {
         return false;
     }
     let capacity = bytes.next_power_of_two();
-    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: capacity, usage, mapped_at_creation: false });
+    let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: capacity,
+        usage,
+        mapped_at_creation: false,
+    });
     *slot = Some(Grown { buffer, capacity });
     true
 }
@@ -262,7 +288,17 @@ impl GpuEvaluator {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        Self { ctx, n_points: 0, params, points: None, candidates: None, output: None, staging: None, bind_group: None, scratch: Vec::new() }
+        Self {
+            ctx,
+            n_points: 0,
+            params,
+            points: None,
+            candidates: None,
+            output: None,
+            staging: None,
+            bind_group: None,
+            scratch: Vec::new(),
+        }
     }
 
     pub fn context(&self) -> &Arc<GpuContext> {
@@ -274,22 +310,39 @@ impl GpuEvaluator {
     fn groups_x(&self, n_candidates: usize) -> u32 {
         let target_total: usize = if self.ctx.is_software() { 16 } else { 4096 };
         let needed = (self.n_points as usize).div_ceil(WG as usize).max(1);
-        let short_enough = (self.n_points as usize).div_ceil(WG as usize * MAX_POINTS_PER_INVOCATION);
-        (target_total / n_candidates.max(1)).max(short_enough).clamp(1, needed) as u32
+        let short_enough =
+            (self.n_points as usize).div_ceil(WG as usize * MAX_POINTS_PER_INVOCATION);
+        (target_total / n_candidates.max(1))
+            .max(short_enough)
+            .clamp(1, needed) as u32
     }
 
     fn upload_candidates(&mut self, candidates: &[Candidate]) -> Result<(), EvalError> {
         let max_y = self.ctx.limits.max_compute_workgroups_per_dimension as usize;
         if candidates.is_empty() || candidates.len() > max_y {
-            return Err(EvalError::TooLarge(format!("{} candidates (1..={max_y} per dispatch)", candidates.len())));
+            return Err(EvalError::TooLarge(format!(
+                "{} candidates (1..={max_y} per dispatch)",
+                candidates.len()
+            )));
         }
         self.scratch.clear();
-        self.scratch.extend(candidates.iter().map(GpuCandidate::from));
+        self.scratch
+            .extend(candidates.iter().map(GpuCandidate::from));
         let bytes = std::mem::size_of_val(self.scratch.as_slice()) as u64;
-        if ensure(&self.ctx, &mut self.candidates, bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST, "candidates") {
+        if ensure(
+            &self.ctx,
+            &mut self.candidates,
+            bytes,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            "candidates",
+        ) {
             self.bind_group = None;
         }
-        self.ctx.queue.write_buffer(&self.candidates.as_ref().unwrap().buffer, 0, bytemuck::cast_slice(&self.scratch));
+        self.ctx.queue.write_buffer(
+            &self.candidates.as_ref().unwrap().buffer,
+            0,
+            bytemuck::cast_slice(&self.scratch),
+        );
         Ok(())
     }
 
@@ -297,39 +350,62 @@ impl GpuEvaluator {
         if bytes > self.ctx.limits.max_storage_buffer_binding_size as u64 {
             return Err(EvalError::TooLarge(format!("{bytes} bytes of output")));
         }
-        let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
+        let usage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST;
         if ensure(&self.ctx, &mut self.output, bytes, usage, "output") {
             self.bind_group = None;
         }
-        ensure(&self.ctx, &mut self.staging, bytes, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, "staging");
+        ensure(
+            &self.ctx,
+            &mut self.staging,
+            bytes,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            "staging",
+        );
         Ok(())
     }
 
     fn bind_group(&mut self) -> wgpu::BindGroup {
         fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-            wgpu::BindGroupEntry { binding, resource: buffer.as_entire_binding() }
+            wgpu::BindGroupEntry {
+                binding,
+                resource: buffer.as_entire_binding(),
+            }
         }
         if self.bind_group.is_none() {
-            self.bind_group = Some(self.ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("meridian"),
-                layout: &self.ctx.layout,
-                entries: &[
-                    entry(0, &self.params),
-                    entry(1, &self.points.as_ref().unwrap().buffer),
-                    entry(2, &self.candidates.as_ref().unwrap().buffer),
-                    entry(3, &self.output.as_ref().unwrap().buffer),
-                ],
-            }));
+            self.bind_group = Some(
+                self.ctx
+                    .device
+                    .create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: Some("meridian"),
+                        layout: &self.ctx.layout,
+                        entries: &[
+                            entry(0, &self.params),
+                            entry(1, &self.points.as_ref().unwrap().buffer),
+                            entry(2, &self.candidates.as_ref().unwrap().buffer),
+                            entry(3, &self.output.as_ref().unwrap().buffer),
+                        ],
+                    }),
+            );
         }
         self.bind_group.clone().unwrap()
     }
 
     /// Records one dispatch and the copy of its output, submits, waits, and returns the
     /// output as f32.
-    fn run(&mut self, pipeline: Pipeline, params: Params, groups: (u32, u32), out_values: usize) -> Result<Vec<f32>, EvalError> {
+    fn run(
+        &mut self,
+        pipeline: Pipeline,
+        params: Params,
+        groups: (u32, u32),
+        out_values: usize,
+    ) -> Result<Vec<f32>, EvalError> {
         self.ctx.check()?;
         let bytes = (out_values * 4) as u64;
-        self.ctx.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        self.ctx
+            .queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         let bind_group = self.bind_group();
         let pipeline = match pipeline {
             Pipeline::Residuals => &self.ctx.residuals,
@@ -338,10 +414,18 @@ impl GpuEvaluator {
         };
         let output = &self.output.as_ref().unwrap().buffer;
         let staging = &self.staging.as_ref().unwrap().buffer;
-        let mut encoder = self.ctx.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("evaluate") });
+        let mut encoder = self
+            .ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("evaluate"),
+            });
         encoder.clear_buffer(output, 0, Some(bytes));
         {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("evaluate"), timestamp_writes: None });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("evaluate"),
+                timestamp_writes: None,
+            });
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
@@ -355,13 +439,18 @@ impl GpuEvaluator {
         });
         self.ctx
             .device
-            .poll(wgpu::PollType::Wait { submission_index: Some(submission), timeout: Some(std::time::Duration::from_secs(60)) })
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(submission),
+                timeout: Some(std::time::Duration::from_secs(60)),
+            })
             .map_err(|e| EvalError::Device(e.to_string()))?;
         rx.recv()
             .map_err(|e| EvalError::Device(e.to_string()))?
             .map_err(|e| EvalError::Device(e.to_string()))?;
         let values = {
-            let view = slice.get_mapped_range().map_err(|e| EvalError::Device(e.to_string()))?;
+            let view = slice
+                .get_mapped_range()
+                .map_err(|e| EvalError::Device(e.to_string()))?;
             bytemuck::cast_slice::<u8, f32>(&view).to_vec()
         };
         staging.unmap();
@@ -370,7 +459,11 @@ impl GpuEvaluator {
     }
 
     fn require_points(&self) -> Result<(), EvalError> {
-        if self.n_points == 0 { Err(EvalError::NoPoints) } else { Ok(()) }
+        if self.n_points == 0 {
+            Err(EvalError::NoPoints)
+        } else {
+            Ok(())
+        }
     }
 }
 
@@ -379,7 +472,9 @@ fn check_markers(out: &[f32], stride: usize) -> Result<(), EvalError> {
     if out.chunks(stride).all(|p| p[stride - 1] == 1.0) {
         Ok(())
     } else {
-        Err(EvalError::Device("the device did not complete the dispatch (missing completion markers)".into()))
+        Err(EvalError::Device(
+            "the device did not complete the dispatch (missing completion markers)".into(),
+        ))
     }
 }
 
@@ -401,21 +496,40 @@ impl Evaluator for GpuEvaluator {
 
     fn set_points(&mut self, points: &[DVec3]) -> Result<(), EvalError> {
         let bytes = (points.len() * 16) as u64;
-        if bytes > self.ctx.limits.max_storage_buffer_binding_size as u64 || points.len() > u32::MAX as usize / 2 {
+        if bytes > self.ctx.limits.max_storage_buffer_binding_size as u64
+            || points.len() > u32::MAX as usize / 2
+        {
             return Err(EvalError::TooLarge(format!("{} points", points.len())));
         }
-        let data: Vec<[f32; 4]> = points.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32, 1.0]).collect();
-        if ensure(&self.ctx, &mut self.points, bytes, wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST, "points") {
+        let data: Vec<[f32; 4]> = points
+            .iter()
+            .map(|p| [p.x as f32, p.y as f32, p.z as f32, 1.0])
+            .collect();
+        if ensure(
+            &self.ctx,
+            &mut self.points,
+            bytes,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            "points",
+        ) {
             self.bind_group = None;
         }
         if !data.is_empty() {
-            self.ctx.queue.write_buffer(&self.points.as_ref().unwrap().buffer, 0, bytemuck::cast_slice(&data));
+            self.ctx.queue.write_buffer(
+                &self.points.as_ref().unwrap().buffer,
+                0,
+                bytemuck::cast_slice(&data),
+            );
         }
         self.n_points = points.len() as u32;
         Ok(())
     }
 
-    fn normal_equations(&mut self, candidates: &[Candidate], loss: Loss) -> Result<Vec<NormalEquations>, EvalError> {
+    fn normal_equations(
+        &mut self,
+        candidates: &[Candidate],
+        loss: Loss,
+    ) -> Result<Vec<NormalEquations>, EvalError> {
         self.require_points()?;
         self.upload_candidates(candidates)?;
         let k = candidates.len();
@@ -423,8 +537,20 @@ impl Evaluator for GpuEvaluator {
         let values = k * groups_x as usize * NE_OUT;
         self.prepare_output((values * 4) as u64)?;
         let (code, scale) = loss.code();
-        let params = Params { n_points: self.n_points, n_candidates: k as u32, loss: code, groups_x, loss_scale: scale, _pad: [0.0; 3] };
-        let out = self.run(Pipeline::NormalEquations, params, (groups_x, k as u32), values)?;
+        let params = Params {
+            n_points: self.n_points,
+            n_candidates: k as u32,
+            loss: code,
+            groups_x,
+            loss_scale: scale,
+            _pad: [0.0; 3],
+        };
+        let out = self.run(
+            Pipeline::NormalEquations,
+            params,
+            (groups_x, k as u32),
+            values,
+        )?;
         // finish the partial sums in f64
         check_markers(&out, NE_OUT)?;
         Ok(out
@@ -449,14 +575,26 @@ impl Evaluator for GpuEvaluator {
         let values = k * groups_x as usize * COST_OUT;
         self.prepare_output((values * 4) as u64)?;
         let (code, scale) = loss.code();
-        let params = Params { n_points: self.n_points, n_candidates: k as u32, loss: code, groups_x, loss_scale: scale, _pad: [0.0; 3] };
+        let params = Params {
+            n_points: self.n_points,
+            n_candidates: k as u32,
+            loss: code,
+            groups_x,
+            loss_scale: scale,
+            _pad: [0.0; 3],
+        };
         let out = self.run(Pipeline::Costs, params, (groups_x, k as u32), values)?;
         check_markers(&out, COST_OUT)?;
         Ok(out
             .chunks(groups_x as usize * COST_OUT)
             .map(|partials| {
-                let (cost, count) = partials.chunks(COST_OUT).fold((0.0, 0.0), |a, p| (a.0 + p[0] as f64, a.1 + p[1] as f64));
-                Cost { cost, count: count.round() as u64 }
+                let (cost, count) = partials
+                    .chunks(COST_OUT)
+                    .fold((0.0, 0.0), |a, p| (a.0 + p[0] as f64, a.1 + p[1] as f64));
+                Cost {
+                    cost,
+                    count: count.round() as u64,
+                }
             })
             .collect())
     }
@@ -467,11 +605,25 @@ impl Evaluator for GpuEvaluator {
         let k = candidates.len();
         let values = k * self.n_points as usize;
         self.prepare_output((values * 4) as u64)?;
-        let params = Params { n_points: self.n_points, n_candidates: k as u32, loss: 0, groups_x: 0, loss_scale: 1.0, _pad: [0.0; 3] };
+        let params = Params {
+            n_points: self.n_points,
+            n_candidates: k as u32,
+            loss: 0,
+            groups_x: 0,
+            loss_scale: 1.0,
+            _pad: [0.0; 3],
+        };
         let groups = (self.n_points.div_ceil(WG_RESIDUALS), k as u32);
         if groups.0 > self.ctx.limits.max_compute_workgroups_per_dimension {
-            return Err(EvalError::TooLarge(format!("{} points for one residual dispatch", self.n_points)));
+            return Err(EvalError::TooLarge(format!(
+                "{} points for one residual dispatch",
+                self.n_points
+            )));
         }
-        Ok(self.run(Pipeline::Residuals, params, groups, values)?.into_iter().map(f64::from).collect())
+        Ok(self
+            .run(Pipeline::Residuals, params, groups, values)?
+            .into_iter()
+            .map(f64::from)
+            .collect())
     }
 }

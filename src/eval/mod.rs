@@ -51,7 +51,11 @@ impl Loss {
             Loss::Squared => (0.5 * r * r, 1.0),
             Loss::Huber(k) => {
                 let a = r.abs();
-                if a <= k { (0.5 * r * r, 1.0) } else { (k * a - 0.5 * k * k, k / a) }
+                if a <= k {
+                    (0.5 * r * r, 1.0)
+                } else {
+                    (k * a - 0.5 * k * k, k / a)
+                }
             }
             Loss::Cauchy(k) => {
                 let t = r / k;
@@ -81,7 +85,12 @@ pub struct NormalEquations {
 
 impl NormalEquations {
     pub fn zero() -> Self {
-        Self { jtj: [[0.0; NUM_PARAMS]; NUM_PARAMS], jtr: [0.0; NUM_PARAMS], cost: 0.0, count: 0 }
+        Self {
+            jtj: [[0.0; NUM_PARAMS]; NUM_PARAMS],
+            jtr: [0.0; NUM_PARAMS],
+            cost: 0.0,
+            count: 0,
+        }
     }
 
     /// Builds from the packed layout the GPU returns: 78 upper-triangle entries (row by
@@ -96,7 +105,8 @@ impl NormalEquations {
                 idx += 1;
             }
         }
-        ne.jtr.copy_from_slice(&packed[NUM_UPPER..NUM_UPPER + NUM_PARAMS]);
+        ne.jtr
+            .copy_from_slice(&packed[NUM_UPPER..NUM_UPPER + NUM_PARAMS]);
         ne.cost = packed[NUM_UPPER + NUM_PARAMS];
         ne.count = packed[NUM_UPPER + NUM_PARAMS + 1].round() as u64;
         ne
@@ -130,7 +140,11 @@ pub trait Evaluator: Send {
     fn device_name(&self) -> String;
     /// Uploads the (normalised) points once; they stay for all following evaluations.
     fn set_points(&mut self, points: &[DVec3]) -> Result<(), EvalError>;
-    fn normal_equations(&mut self, candidates: &[Candidate], loss: Loss) -> Result<Vec<NormalEquations>, EvalError>;
+    fn normal_equations(
+        &mut self,
+        candidates: &[Candidate],
+        loss: Loss,
+    ) -> Result<Vec<NormalEquations>, EvalError>;
     fn costs(&mut self, candidates: &[Candidate], loss: Loss) -> Result<Vec<Cost>, EvalError>;
     /// Signed residuals, `candidates.len()` blocks of one value per point.
     fn residuals(&mut self, candidates: &[Candidate]) -> Result<Vec<f64>, EvalError>;
@@ -148,12 +162,27 @@ pub struct Normalization {
 impl Normalization {
     pub fn of(points: &[DVec3]) -> Self {
         if points.is_empty() {
-            return Self { centre: DVec3::ZERO, scale: 1.0 };
+            return Self {
+                centre: DVec3::ZERO,
+                scale: 1.0,
+            };
         }
         let n = points.len() as f64;
         let centre = points.iter().copied().sum::<DVec3>() / n;
-        let rms = (points.iter().map(|p| (*p - centre).length_squared()).sum::<f64>() / n).sqrt();
-        Self { centre, scale: if rms > 0.0 && rms.is_finite() { rms } else { 1.0 } }
+        let rms = (points
+            .iter()
+            .map(|p| (*p - centre).length_squared())
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        Self {
+            centre,
+            scale: if rms > 0.0 && rms.is_finite() {
+                rms
+            } else {
+                1.0
+            },
+        }
     }
 
     pub fn point(&self, p: DVec3) -> DVec3 {
@@ -168,7 +197,12 @@ impl Normalization {
     pub fn candidate(&self, shape: &Shape, pose: &Pose) -> Candidate {
         let s = self.scale;
         Candidate {
-            shape: Shape { a1: shape.a1 / s, a2: shape.a2 / s, a3: shape.a3 / s, ..*shape },
+            shape: Shape {
+                a1: shape.a1 / s,
+                a2: shape.a2 / s,
+                a3: shape.a3 / s,
+                ..*shape
+            },
             pose: Pose::new(pose.rotation, (pose.translation - self.centre) / s),
         }
     }
@@ -177,7 +211,12 @@ impl Normalization {
     pub fn to_world(&self, c: &Candidate) -> (Shape, Pose) {
         let s = self.scale;
         (
-            Shape { a1: c.shape.a1 * s, a2: c.shape.a2 * s, a3: c.shape.a3 * s, ..c.shape },
+            Shape {
+                a1: c.shape.a1 * s,
+                a2: c.shape.a2 * s,
+                a3: c.shape.a3 * s,
+                ..c.shape
+            },
             Pose::new(c.pose.rotation, c.pose.translation * s + self.centre),
         )
     }
@@ -185,7 +224,17 @@ impl Normalization {
 
 /// Which evaluator to run: `auto` takes a GPU adapter when one is found and falls back to
 /// the CPU evaluator otherwise.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Default,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Backend {
     #[default]
@@ -197,7 +246,11 @@ pub enum Backend {
 impl Backend {
     /// From `SUPERTOROID_BACKEND` (auto|gpu|cpu), if set.
     pub fn from_env() -> Option<Self> {
-        match std::env::var("SUPERTOROID_BACKEND").ok()?.to_ascii_lowercase().as_str() {
+        match std::env::var("SUPERTOROID_BACKEND")
+            .ok()?
+            .to_ascii_lowercase()
+            .as_str()
+        {
             "auto" => Some(Self::Auto),
             "gpu" => Some(Self::Gpu),
             "cpu" => Some(Self::Cpu),
@@ -211,7 +264,9 @@ impl Backend {
 pub fn make_evaluator(backend: Backend) -> Result<Box<dyn Evaluator>, EvalError> {
     match backend {
         Backend::Cpu => Ok(Box::new(CpuEvaluator::new())),
-        Backend::Gpu => Ok(Box::new(GpuEvaluator::new(GpuContext::shared(&AdapterChoice::from_env())?))),
+        Backend::Gpu => Ok(Box::new(GpuEvaluator::new(GpuContext::shared(
+            &AdapterChoice::from_env(),
+        )?))),
         Backend::Auto => match GpuContext::shared(&AdapterChoice::from_env()) {
             Ok(ctx) => Ok(Box::new(GpuEvaluator::new(ctx))),
             Err(_) => Ok(Box::new(CpuEvaluator::new())),

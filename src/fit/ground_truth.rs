@@ -30,21 +30,38 @@ pub fn make_case(seed: u64, partial: bool, noise: f64, outlier_fraction: f64) ->
         rng.random_range(0.3..1.8),
         rng.random_range(0.3..1.8),
     );
-    let axis = DVec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)).normalize_or(DVec3::Z);
+    let axis = DVec3::new(
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+    )
+    .normalize_or(DVec3::Z);
     let pose = Pose::new(
         DQuat::from_axis_angle(axis, rng.random_range(-3.1..3.1)),
-        DVec3::new(rng.random_range(-0.3..0.3), rng.random_range(-0.3..0.3), rng.random_range(0.4..1.0)),
+        DVec3::new(
+            rng.random_range(-0.3..0.3),
+            rng.random_range(-0.3..0.3),
+            rng.random_range(0.4..1.0),
+        ),
     );
     let mut points = if partial {
         let camera = Camera::random_view(&shape, &pose, Intrinsics::REALSENSE_640X480, &mut rng);
-        let view = synth::render_view(&shape, &pose, &camera, 0.0001).expect("valid shape and camera");
+        let view =
+            synth::render_view(&shape, &pose, &camera, 0.0001).expect("valid shape and camera");
         synth::subsample(&view.points, 2000, &mut rng)
     } else {
         synth::sample_surface(&shape, &pose, 2000, &mut rng)
     };
     synth::add_noise(&mut points, noise * shape.size(), &mut rng);
     synth::add_outliers(&mut points, &shape, &pose, outlier_fraction, &mut rng);
-    Case { shape, pose, partial, noise, outlier_fraction, points }
+    Case {
+        shape,
+        pose,
+        partial,
+        noise,
+        outlier_fraction,
+        points,
+    }
 }
 
 /// Errors of a fit against the truth, after resolving the symmetries.
@@ -64,7 +81,11 @@ pub struct Errors {
 
 impl Errors {
     pub fn success(&self) -> bool {
-        self.centre < 0.05 && self.axis_degrees < 5.0 && self.sizes < 0.10 && self.a4 < 0.10 && self.eps < 0.15
+        self.centre < 0.05
+            && self.axis_degrees < 5.0
+            && self.sizes < 0.10
+            && self.a4 < 0.10
+            && self.eps < 0.15
     }
 }
 
@@ -79,11 +100,21 @@ pub fn compare(truth: (&Shape, &Pose), fitted: (&Shape, &Pose)) -> Errors {
     let fitted_x = fp.rotation * DVec3::X;
     let fitted_y = fp.rotation * DVec3::Y;
     let true_x = tp.rotation * DVec3::X;
-    let (fa1, fa2) = if true_x.dot(fitted_x).abs() >= true_x.dot(fitted_y).abs() { (fs.a1, fs.a2) } else { (fs.a2, fs.a1) };
+    let (fa1, fa2) = if true_x.dot(fitted_x).abs() >= true_x.dot(fitted_y).abs() {
+        (fs.a1, fs.a2)
+    } else {
+        (fs.a2, fs.a1)
+    };
     let rel = |a: f64, b: f64| (a - b).abs() / b;
     let sizes = rel(fa1, ts.a1).max(rel(fa2, ts.a2)).max(rel(fs.a3, ts.a3));
     // a4 scales a1/a2: compare the mean-superellipse radii a1·a4, a2·a4 too
     let a4 = rel(fs.a4, ts.a4);
     let eps = (fs.eps1 - ts.eps1).abs().max((fs.eps2 - ts.eps2).abs());
-    Errors { centre, axis_degrees, sizes, a4, eps }
+    Errors {
+        centre,
+        axis_degrees,
+        sizes,
+        a4,
+        eps,
+    }
 }

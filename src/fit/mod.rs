@@ -14,8 +14,8 @@
 pub mod ground_truth;
 
 use crate::eval::{Candidate, EvalError, Evaluator, Loss, Normalization};
-use crate::model::{meridian_distance, Pose, Shape};
-use crate::solve::{solve, Bounds, SolverOptions};
+use crate::model::{Pose, Shape, meridian_distance};
+use crate::solve::{Bounds, SolverOptions, solve};
 use crate::synth;
 use glam::{DMat3, DQuat, DVec3};
 use serde::Serialize;
@@ -41,7 +41,16 @@ pub struct FitOptions {
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { seed: 0, stage1_points: 150, stage2_points: 1000, a4_reward: 1e-4, huber: 0.05, eps_min: 0.1, eps_max: 2.0, known_axis: None }
+        Self {
+            seed: 0,
+            stage1_points: 150,
+            stage2_points: 1000,
+            a4_reward: 1e-4,
+            huber: 0.05,
+            eps_min: 0.1,
+            eps_max: 2.0,
+            known_axis: None,
+        }
     }
 }
 
@@ -63,16 +72,6 @@ impl From<EvalError> for FitError {
     fn from(e: EvalError) -> Self {
         FitError::Evaluator(e.to_string())
     }
-}
-
-#[derive(Clone, Debug, Serialize)]
-pub struct ShapeOut {
-    pub a1: f64,
-    pub a2: f64,
-    pub a3: f64,
-    pub a4: f64,
-    pub eps1: f64,
-    pub eps2: f64,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -122,7 +121,7 @@ pub struct PointsOut {
 /// The result of `supertoroid fit` (and of the service), documented in the README.
 #[derive(Clone, Debug, Serialize)]
 pub struct FitReport {
-    pub shape: ShapeOut,
+    pub shape: Shape,
     pub pose: PoseOut,
     pub quality: Quality,
     pub timing_ms: Timing,
@@ -167,7 +166,13 @@ pub fn principal_axes(points: &[DVec3]) -> (DMat3, DVec3) {
     let eig = cov.symmetric_eigen();
     let mut order = [0usize, 1, 2];
     order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let col = |i: usize| DVec3::new(eig.eigenvectors[(0, i)], eig.eigenvectors[(1, i)], eig.eigenvectors[(2, i)]);
+    let col = |i: usize| {
+        DVec3::new(
+            eig.eigenvectors[(0, i)],
+            eig.eigenvectors[(1, i)],
+            eig.eigenvectors[(2, i)],
+        )
+    };
     let axes = DMat3::from_cols(col(order[0]), col(order[1]), col(order[2]));
     let sigma = DVec3::new(
         eig.eigenvalues[order[0]].max(0.0).sqrt(),
@@ -181,7 +186,9 @@ pub fn principal_axes(points: &[DVec3]) -> (DMat3, DVec3) {
 /// `hint` as possible.
 fn frame_with_z(axis: DVec3, hint: DVec3) -> DQuat {
     let z = axis.normalize();
-    let x = (hint - z * hint.dot(z)).try_normalize().unwrap_or_else(|| z.any_orthonormal_vector());
+    let x = (hint - z * hint.dot(z))
+        .try_normalize()
+        .unwrap_or_else(|| z.any_orthonormal_vector());
     let y = z.cross(x);
     DQuat::from_mat3(&DMat3::from_cols(x, y, z))
 }
@@ -199,14 +206,23 @@ fn start_for_axis(points: &[DVec3], axis: DVec3, hint: DVec3, a4: f64) -> Candid
     let outer = pick(&radial, 0.95).max(1e-3);
     let half_height = pick(&height, 0.95).max(1e-3 * outer);
     let a = outer / (1.0 + a4);
-    Candidate { shape: Shape::new(a, a, half_height, a4, 1.0, 1.0), pose: Pose::new(rotation, DVec3::ZERO) }
+    Candidate {
+        shape: Shape::new(a, a, half_height, a4, 1.0, 1.0),
+        pose: Pose::new(rotation, DVec3::ZERO),
+    }
 }
 
 /// Fits one supertoroid to a cloud (world units in, world units out).
-pub fn fit(evaluator: &mut dyn Evaluator, points: &[DVec3], o: &FitOptions) -> Result<FitReport, FitError> {
+pub fn fit(
+    evaluator: &mut dyn Evaluator,
+    points: &[DVec3],
+    o: &FitOptions,
+) -> Result<FitReport, FitError> {
     let start = Instant::now();
     if o.stage1_points < MIN_POINTS || o.stage2_points < MIN_POINTS {
-        return Err(FitError::InvalidOption(format!("points per stage must be at least {MIN_POINTS}")));
+        return Err(FitError::InvalidOption(format!(
+            "points per stage must be at least {MIN_POINTS}"
+        )));
     }
     let (axes, _) = check_cloud(points)?;
     let norm = Normalization::of(points);
@@ -220,30 +236,51 @@ pub fn fit(evaluator: &mut dyn Evaluator, points: &[DVec3], o: &FitOptions) -> R
     // Stage 1: batched multi-start.
     let axes_to_try: Vec<DVec3> = match o.known_axis {
         Some(a) if a.length() > 0.0 => vec![a.normalize()],
-        Some(_) => return Err(FitError::InvalidOption("known axis must not be zero".into())),
+        Some(_) => {
+            return Err(FitError::InvalidOption(
+                "known axis must not be zero".into(),
+            ));
+        }
         None => vec![axes.z_axis, axes.y_axis, axes.x_axis],
     };
     let mut starts = Vec::new();
     for axis in &axes_to_try {
-        let hint = if axis.dot(axes.x_axis).abs() > 0.9 { axes.y_axis } else { axes.x_axis };
+        let hint = if axis.dot(axes.x_axis).abs() > 0.9 {
+            axes.y_axis
+        } else {
+            axes.x_axis
+        };
         for a4 in [1.5, 3.0] {
             starts.push(start_for_axis(&stage1_pts, *axis, hint, a4));
         }
     }
     evaluator.set_points(&stage1_pts)?;
-    let mut opts1 = SolverOptions { loss, max_iterations: 40, cost_tolerance: 1e-5, ..Default::default() };
+    let mut opts1 = SolverOptions {
+        loss,
+        max_iterations: 40,
+        cost_tolerance: 1e-5,
+        ..Default::default()
+    };
     if o.known_axis.is_some() {
         opts1.fixed[9] = true;
         opts1.fixed[10] = true;
     }
     let stage1 = solve(evaluator, &starts, &bounds, &opts1)?;
-    let best = stage1.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)).expect("at least one start");
+    let best = stage1
+        .iter()
+        .min_by(|a, b| a.cost.total_cmp(&b.cost))
+        .expect("at least one start");
     let stage1_iterations = stage1.iter().map(|s| s.iterations).max().unwrap_or(0);
     let t1 = start.elapsed();
 
     // Stage 2: refine on more points, with the a4 reward.
     evaluator.set_points(&stage2_pts)?;
-    let opts2 = SolverOptions { loss, a4_reward: o.a4_reward, fixed: opts1.fixed, ..Default::default() };
+    let opts2 = SolverOptions {
+        loss,
+        a4_reward: o.a4_reward,
+        fixed: opts1.fixed,
+        ..Default::default()
+    };
     let stage2 = solve(evaluator, &[best.candidate], &bounds, &opts2)?.remove(0);
     let t_total = start.elapsed();
 
@@ -252,10 +289,14 @@ pub fn fit(evaluator: &mut dyn Evaluator, points: &[DVec3], o: &FitOptions) -> R
     let r = pose.matrix();
     let q = pose.rotation;
     Ok(FitReport {
-        shape: ShapeOut { a1: shape.a1, a2: shape.a2, a3: shape.a3, a4: shape.a4, eps1: shape.eps1, eps2: shape.eps2 },
+        shape,
         pose: PoseOut {
             translation: pose.translation.to_array(),
-            rotation: [r.row(0).to_array(), r.row(1).to_array(), r.row(2).to_array()],
+            rotation: [
+                r.row(0).to_array(),
+                r.row(1).to_array(),
+                r.row(2).to_array(),
+            ],
             quaternion_wxyz: [q.w, q.x, q.y, q.z],
         },
         quality,
@@ -264,20 +305,38 @@ pub fn fit(evaluator: &mut dyn Evaluator, points: &[DVec3], o: &FitOptions) -> R
             stage2: (t_total - t1).as_secs_f64() * 1e3,
             total: t_total.as_secs_f64() * 1e3,
         },
-        iterations: Iterations { stage1: stage1_iterations, stage2: stage2.iterations },
-        backend: BackendOut { kind: evaluator.kind().into(), adapter: evaluator.device_name() },
-        points: PointsOut { input: points.len(), stage1: stage1_pts.len(), stage2: stage2_pts.len() },
+        iterations: Iterations {
+            stage1: stage1_iterations,
+            stage2: stage2.iterations,
+        },
+        backend: BackendOut {
+            kind: evaluator.kind().into(),
+            adapter: evaluator.device_name(),
+        },
+        points: PointsOut {
+            input: points.len(),
+            stage1: stage1_pts.len(),
+            stage2: stage2_pts.len(),
+        },
         fitted: (shape, pose),
     })
 }
 
 /// Distances of every input point to the fitted surface, summarised.
 pub fn quality(shape: &Shape, pose: &Pose, points: &[DVec3]) -> Quality {
-    let mut d: Vec<f64> = points.iter().map(|p| meridian_distance(shape, pose.to_canonical(*p)).distance).collect();
+    let mut d: Vec<f64> = points
+        .iter()
+        .map(|p| meridian_distance(shape, pose.to_canonical(*p)).distance)
+        .collect();
     let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len().max(1) as f64).sqrt();
     d.sort_by(f64::total_cmp);
     let median = d.get(d.len() / 2).copied().unwrap_or(0.0);
     let size = shape.size();
     let inliers = d.iter().filter(|&&x| x <= 0.02 * size).count() as f64 / d.len().max(1) as f64;
-    Quality { rms_distance: rms, median_distance: median, relative_rms: rms / size, inlier_fraction: inliers }
+    Quality {
+        rms_distance: rms,
+        median_distance: median,
+        relative_rms: rms / size,
+        inlier_fraction: inliers,
+    }
 }

@@ -27,8 +27,13 @@ pub enum CloudError {
 
 /// Reads a cloud from a file, the format chosen by the file's extension.
 pub fn read_cloud(path: &Path) -> Result<Vec<DVec3>, CloudError> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let bytes = std::fs::read(path).map_err(|e| CloudError::Io(format!("{}: {e}", path.display())))?;
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let bytes =
+        std::fs::read(path).map_err(|e| CloudError::Io(format!("{}: {e}", path.display())))?;
     match ext.as_str() {
         "xyz" | "txt" | "csv" => parse_xyz(&String::from_utf8_lossy(&bytes)),
         other => Err(CloudError::UnsupportedFormat(other.to_string())),
@@ -37,7 +42,11 @@ pub fn read_cloud(path: &Path) -> Result<Vec<DVec3>, CloudError> {
 
 /// Writes a cloud to a file, the format chosen by the file's extension (.xyz or .ply).
 pub fn write_cloud(path: &Path, points: &[DVec3]) -> Result<(), CloudError> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
     let mut out = Vec::new();
     match ext.as_str() {
         "xyz" | "txt" => write_xyz(&mut out, points),

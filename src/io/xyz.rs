@@ -13,24 +13,41 @@ pub fn parse_xyz(text: &str) -> Result<Vec<DVec3>, CloudError> {
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
-        let fields: Vec<&str> = line.split(|c: char| c == ',' || c.is_whitespace()).filter(|f| !f.is_empty()).collect();
+        let fields: Vec<&str> = line
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|f| !f.is_empty())
+            .collect();
         let parsed: Result<Vec<f64>, _> = fields.iter().take(3).map(|f| f.parse::<f64>()).collect();
         match parsed {
             Ok(v) if v.len() == 3 => {
                 let p = DVec3::new(v[0], v[1], v[2]);
                 if !p.is_finite() {
-                    return Err(CloudError::NonFinite { index: points.len() });
+                    return Err(CloudError::NonFinite {
+                        index: points.len(),
+                    });
                 }
                 points.push(p);
                 seen_data = true;
             }
             Ok(v) => {
-                return Err(CloudError::Parse { line: i + 1, message: format!("expected 3 coordinates, found {}", v.len()) })
+                return Err(CloudError::Parse {
+                    line: i + 1,
+                    message: format!("expected 3 coordinates, found {}", v.len()),
+                });
             }
-            Err(_) if !seen_data && points.is_empty() && fields.iter().all(|f| f.parse::<f64>().is_err()) => {
+            Err(_)
+                if !seen_data
+                    && points.is_empty()
+                    && fields.iter().all(|f| f.parse::<f64>().is_err()) =>
+            {
                 seen_data = true; // a header line such as "x,y,z"
             }
-            Err(_) => return Err(CloudError::Parse { line: i + 1, message: format!("not a number in {line:?}") }),
+            Err(_) => {
+                return Err(CloudError::Parse {
+                    line: i + 1,
+                    message: format!("not a number in {line:?}"),
+                });
+            }
         }
     }
     if points.is_empty() {

@@ -3,7 +3,7 @@
 //! Valid in the open parameter quadrants (the seams cos = 0 or sin = 0 are singular for
 //! eps != 1), extended to all quadrants by the signed-power symmetry.
 
-use super::shape::{signed_pow, Shape};
+use super::shape::{Shape, signed_pow};
 use glam::DVec3;
 
 /// d/dt [sign(c)|c|^e] = e·|c|^(e-1)·dc/dt.
@@ -13,7 +13,14 @@ fn dspow(c: f64, dc: f64, e: f64) -> f64 {
 
 /// (t_omega, t_eta): non-unit tangents along the coordinate curves (eqs. 16, 17).
 pub fn tangents(shape: &Shape, eta: f64, omega: f64) -> (DVec3, DVec3) {
-    let Shape { a1, a2, a3, a4, eps1, eps2 } = *shape;
+    let Shape {
+        a1,
+        a2,
+        a3,
+        a4,
+        eps1,
+        eps2,
+    } = *shape;
     let (se, ce) = eta.sin_cos();
     let (so, co) = omega.sin_cos();
     let radius = a4 + signed_pow(ce, eps1);
@@ -51,7 +58,14 @@ pub struct NormalCurvatures {
 }
 
 pub fn normal_curvatures(shape: &Shape, eta: f64, omega: f64) -> NormalCurvatures {
-    let Shape { a1, a2, a3, a4, eps1, eps2 } = *shape;
+    let Shape {
+        a1,
+        a2,
+        a3,
+        a4,
+        eps1,
+        eps2,
+    } = *shape;
     let (se, ce) = eta.sin_cos();
     let (so, co) = omega.sin_cos();
     let (ce, se, co, so) = (ce.abs(), se.abs(), co.abs(), so.abs());
@@ -59,14 +73,22 @@ pub fn normal_curvatures(shape: &Shape, eta: f64, omega: f64) -> NormalCurvature
     // eq. (19), k_omega
     let k_omega = a1 * a2 * (eps2 - 2.0).abs() * radius * radius * (co * so).powf(eps2 - 1.0)
         / (eps2
-            * (radius * radius * co * co * so * so
+            * (radius
+                * radius
+                * co
+                * co
+                * so
+                * so
                 * (a1 * a1 * co.powf(2.0 * eps2 - 4.0) + a2 * a2 * so.powf(2.0 * eps2 - 4.0)))
-                .powf(1.5));
+            .powf(1.5));
     // eq. (19), k_eta, with a_omega^2 = a1^2 cos^(2eps2) + a2^2 sin^(2eps2) (eq. 13)
     let a_omega_sq = a1 * a1 * co.powf(2.0 * eps2) + a2 * a2 * so.powf(2.0 * eps2);
     let k_eta = a3 * (eps1 - 2.0).abs() * (ce * se).powf(eps1 - 1.0) * a_omega_sq.sqrt()
         / (eps1
-            * (ce * ce * se * se
+            * (ce
+                * ce
+                * se
+                * se
                 * (a3 * a3 * se.powf(2.0 * eps1 - 4.0) + ce.powf(2.0 * eps1 - 4.0) * a_omega_sq))
                 .powf(1.5));
     // Normal curvatures by the second fundamental form, II(t,t)/I(t,t), with second

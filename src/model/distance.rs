@@ -24,7 +24,7 @@
 //! superellipse's continuation beyond the axis, not on the implicit surface. The distance
 //! is still the paper's and still finite.
 
-use super::shape::{superellipse_norm, Shape};
+use super::shape::{Shape, superellipse_norm};
 use glam::DVec3;
 
 /// Meridian radial distance of a canonical point, with the surface point it measures to.
@@ -60,14 +60,26 @@ struct Meridian {
 
 fn meridian(shape: &Shape, p: DVec3) -> Meridian {
     let rho = p.x.hypot(p.y);
-    let dir = if rho > 0.0 { [p.x / rho, p.y / rho] } else { [1.0, 0.0] };
+    let dir = if rho > 0.0 {
+        [p.x / rho, p.y / rho]
+    } else {
+        [1.0, 0.0]
+    };
     let s = 1.0 / shape.top_view_norm(dir[0], dir[1]);
     let g = rho / s;
     let big_x = g - shape.a4;
     let big_z = p.z / shape.a3;
     let n = superellipse_norm(big_x, big_z, shape.eps1);
     let l = (s * big_x).hypot(p.z);
-    Meridian { dir, s, g, big_x, big_z, n, l }
+    Meridian {
+        dir,
+        s,
+        g,
+        big_x,
+        big_z,
+        n,
+        l,
+    }
 }
 
 /// Closed-form meridian radial distance (see the module docs) of a point given in the
@@ -77,7 +89,11 @@ pub fn meridian_distance(shape: &Shape, p: DVec3) -> MeridianPoint {
     let m = meridian(shape, p);
     // Section-centre-to-surface length along the ray: L/N = |(s·X, a3·Z)| / N, taken in
     // the x' direction at the centre itself.
-    let (ux, uz) = if m.n > 0.0 { (m.big_x / m.n, m.big_z / m.n) } else { (1.0, 0.0) };
+    let (ux, uz) = if m.n > 0.0 {
+        (m.big_x / m.n, m.big_z / m.n)
+    } else {
+        (1.0, 0.0)
+    };
     let reach = (m.s * ux).hypot(shape.a3 * uz);
     let signed = m.l - reach;
     let centre = DVec3::new(shape.a4 * m.s * m.dir[0], shape.a4 * m.s * m.dir[1], 0.0);
@@ -94,10 +110,21 @@ pub fn meridian_distance(shape: &Shape, p: DVec3) -> MeridianPoint {
 /// The paper's step-by-step construction (§III), kept as an independent check of the
 /// closed form. Loses precision for eps below about 0.3 (large powers of tan).
 pub fn meridian_distance_stepwise(shape: &Shape, p: DVec3) -> MeridianPoint {
-    let Shape { a1, a2, a3, a4, eps1, eps2 } = *shape;
+    let Shape {
+        a1,
+        a2,
+        a3,
+        a4,
+        eps1,
+        eps2,
+    } = *shape;
     let spow = super::shape::signed_pow;
     // Angle of the vertical projection plane (eq. 8).
-    let omega_pi = if p.x == 0.0 && p.y == 0.0 { 0.0 } else { p.y.atan2(p.x) };
+    let omega_pi = if p.x == 0.0 && p.y == 0.0 {
+        0.0
+    } else {
+        p.y.atan2(p.x)
+    };
     // Section angle: tan^eps2(omega_s) = (a1/a2)·tan(omega_pi), quadrant-safe.
     let omega_s =
         spow(omega_pi.sin() / a2, 1.0 / eps2).atan2(spow(omega_pi.cos() / a1, 1.0 / eps2));
@@ -172,11 +199,22 @@ fn norm_partials(u: f64, v: f64, m: f64, e: f64) -> (f64, f64, f64) {
 /// the derivatives returned are those of the guarded branch.
 pub fn meridian_residual_with_gradient(shape: &Shape, p: DVec3) -> ResidualGradient {
     let m = meridian(shape, p);
-    let Shape { a1, a2, a3, eps1, eps2, .. } = *shape;
+    let Shape {
+        a1,
+        a2,
+        a3,
+        eps1,
+        eps2,
+        ..
+    } = *shape;
     let residual = meridian_distance(shape, p).signed;
     // At (within 1e-12 of) a section centre the ray direction is undefined: no gradient.
     if m.n < 1e-12 || m.l == 0.0 {
-        return ResidualGradient { residual, d_point: DVec3::ZERO, d_shape: [0.0; 6] };
+        return ResidualGradient {
+            residual,
+            d_point: DVec3::ZERO,
+            d_shape: [0.0; 6],
+        };
     }
     // r as a function of L and N.
     let r_l = 1.0 - 1.0 / m.n;
@@ -206,12 +244,9 @@ pub fn meridian_residual_with_gradient(shape: &Shape, p: DVec3) -> ResidualGradi
     };
     let s_of = |g_theta: f64| if m.g > 0.0 { -m.s * g_theta / m.g } else { 0.0 };
     // Through G (which moves X, and s) and the section norm.
-    let via_g = |g_theta: f64, s_theta: f64| r_l * (l_s * s_theta + l_x * g_theta) + r_n * n_x * g_theta;
-    let d_point = DVec3::new(
-        via_g(g_x, s_x),
-        via_g(g_y, s_y),
-        r_l * l_z + r_n * n_z / a3,
-    );
+    let via_g =
+        |g_theta: f64, s_theta: f64| r_l * (l_s * s_theta + l_x * g_theta) + r_n * n_x * g_theta;
+    let d_point = DVec3::new(via_g(g_x, s_x), via_g(g_y, s_y), r_l * l_z + r_n * n_z / a3);
     let d_shape = [
         via_g(g_a1, s_of(g_a1)),
         via_g(g_a2, s_of(g_a2)),
@@ -220,5 +255,9 @@ pub fn meridian_residual_with_gradient(shape: &Shape, p: DVec3) -> ResidualGradi
         r_n * n_e1,
         via_g(g_e2, s_of(g_e2)),
     ];
-    ResidualGradient { residual, d_point, d_shape }
+    ResidualGradient {
+        residual,
+        d_point,
+        d_shape,
+    }
 }

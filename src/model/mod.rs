@@ -7,12 +7,12 @@ mod differential;
 mod distance;
 mod shape;
 
-pub use differential::{normal_curvatures, tangents, unit_normal, NormalCurvatures};
+pub use differential::{NormalCurvatures, normal_curvatures, tangents, unit_normal};
 pub use distance::{
-    meridian_distance, meridian_distance_stepwise, meridian_residual_with_gradient,
-    MeridianPoint, ResidualGradient,
+    MeridianPoint, ResidualGradient, meridian_distance, meridian_distance_stepwise,
+    meridian_residual_with_gradient,
 };
 pub use shape::{
-    mean_superellipse_point, mean_superellipse_radius, parse_floats, signed_pow, superellipse_norm, Pose,
-    Shape, ShapeBounds,
+    Pose, Shape, ShapeBounds, mean_superellipse_point, mean_superellipse_radius, parse_floats,
+    signed_pow, superellipse_norm,
 };

@@ -27,13 +27,24 @@ pub struct ShapeBounds {
 
 impl Default for ShapeBounds {
     fn default() -> Self {
-        Self { eps_min: 0.1, eps_max: 2.0, a4_max: 10.0 }
+        Self {
+            eps_min: 0.1,
+            eps_max: 2.0,
+            a4_max: 10.0,
+        }
     }
 }
 
 impl Shape {
     pub const fn new(a1: f64, a2: f64, a3: f64, a4: f64, eps1: f64, eps2: f64) -> Self {
-        Self { a1, a2, a3, a4, eps1, eps2 }
+        Self {
+            a1,
+            a2,
+            a3,
+            a4,
+            eps1,
+            eps2,
+        }
     }
 
     pub fn to_array(self) -> [f64; 6] {
@@ -66,7 +77,10 @@ impl Shape {
             return Err(format!("a4 must be >= 0, got {}", self.a4));
         }
         if !(self.eps1 > 0.0 && self.eps1 <= 4.0 && self.eps2 > 0.0 && self.eps2 <= 4.0) {
-            return Err(format!("eps1, eps2 must be in (0, 4], got {}, {}", self.eps1, self.eps2));
+            return Err(format!(
+                "eps1, eps2 must be in (0, 4], got {}, {}",
+                self.eps1, self.eps2
+            ));
         }
         Ok(())
     }
@@ -74,7 +88,11 @@ impl Shape {
     /// Half-extents of the canonical bounding box: the supertoroid lies within
     /// |x| <= a1(1+a4), |y| <= a2(1+a4), |z| <= a3 (paper, after eq. 3).
     pub fn half_extents(&self) -> DVec3 {
-        DVec3::new(self.a1 * (1.0 + self.a4), self.a2 * (1.0 + self.a4), self.a3)
+        DVec3::new(
+            self.a1 * (1.0 + self.a4),
+            self.a2 * (1.0 + self.a4),
+            self.a3,
+        )
     }
 
     /// The object's size used for relative tolerances (noise, errors): the half-diagonal
@@ -180,10 +198,16 @@ impl Default for Pose {
 }
 
 impl Pose {
-    pub const IDENTITY: Self = Self { rotation: DQuat::IDENTITY, translation: DVec3::ZERO };
+    pub const IDENTITY: Self = Self {
+        rotation: DQuat::IDENTITY,
+        translation: DVec3::ZERO,
+    };
 
     pub fn new(rotation: DQuat, translation: DVec3) -> Self {
-        Self { rotation: rotation.normalize(), translation }
+        Self {
+            rotation: rotation.normalize(),
+            translation,
+        }
     }
 
     pub fn matrix(&self) -> DMat3 {
@@ -228,11 +252,16 @@ impl Pose {
 pub fn parse_floats<const N: usize>(text: &str, what: &str) -> Result<[f64; N], String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     if parts.len() != N {
-        return Err(format!("{what}: expected {N} comma-separated numbers, got {:?}", text));
+        return Err(format!(
+            "{what}: expected {N} comma-separated numbers, got {:?}",
+            text
+        ));
     }
     let mut out = [0.0; N];
     for (o, p) in out.iter_mut().zip(&parts) {
-        *o = p.parse::<f64>().map_err(|_| format!("{what}: {p:?} is not a number"))?;
+        *o = p
+            .parse::<f64>()
+            .map_err(|_| format!("{what}: {p:?} is not a number"))?;
         if !o.is_finite() {
             return Err(format!("{what}: {p:?} is not finite"));
         }

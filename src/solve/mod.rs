@@ -125,7 +125,9 @@ struct State {
 
 fn barrier(shape: &Shape, b: &Bounds, mu: f64) -> f64 {
     let v = shape.to_array();
-    (0..6).map(|i| -mu * ((v[i] - b.lower[i]).ln() + (b.upper[i] - v[i]).ln())).sum()
+    (0..6)
+        .map(|i| -mu * ((v[i] - b.lower[i]).ln() + (b.upper[i] - v[i]).ln()))
+        .sum()
 }
 
 fn merit(cost: f64, count: u64, shape: &Shape, b: &Bounds, mu: f64, o: &SolverOptions) -> f64 {
@@ -140,18 +142,40 @@ pub fn apply_step(c: &Candidate, step: &[f64; NUM_PARAMS]) -> Candidate {
     }
     let mut pose = c.pose;
     pose.translation += glam::DVec3::new(step[6], step[7], step[8]);
-    pose.rotation = (pose.rotation * DQuat::from_scaled_axis(glam::DVec3::new(step[9], step[10], step[11]))).normalize();
-    Candidate { shape: Shape::from_array(shape), pose }
+    pose.rotation = (pose.rotation
+        * DQuat::from_scaled_axis(glam::DVec3::new(step[9], step[10], step[11])))
+    .normalize();
+    Candidate {
+        shape: Shape::from_array(shape),
+        pose,
+    }
 }
 
 /// Solves from every start (batched through the evaluator) and returns one solution per start.
-pub fn solve(evaluator: &mut dyn Evaluator, starts: &[Candidate], bounds: &Bounds, o: &SolverOptions) -> Result<Vec<Solution>, EvalError> {
-    let first = evaluator.costs(&starts.iter().map(|s| Candidate { shape: bounds.interior(&s.shape), ..*s }).collect::<Vec<_>>(), o.loss)?;
+pub fn solve(
+    evaluator: &mut dyn Evaluator,
+    starts: &[Candidate],
+    bounds: &Bounds,
+    o: &SolverOptions,
+) -> Result<Vec<Solution>, EvalError> {
+    let first = evaluator.costs(
+        &starts
+            .iter()
+            .map(|s| Candidate {
+                shape: bounds.interior(&s.shape),
+                ..*s
+            })
+            .collect::<Vec<_>>(),
+        o.loss,
+    )?;
     let mut states: Vec<State> = starts
         .iter()
         .zip(&first)
         .map(|(s, c0)| {
-            let c = Candidate { shape: bounds.interior(&s.shape), ..*s };
+            let c = Candidate {
+                shape: bounds.interior(&s.shape),
+                ..*s
+            };
             // initial barrier weight: small against the cost, and the duals on the central path
             let mu = 1e-3 * c0.cost.max(1e-12) / 12.0;
             let v = c.shape.to_array();
@@ -161,12 +185,26 @@ pub fn solve(evaluator: &mut dyn Evaluator, starts: &[Candidate], bounds: &Bound
                 z_lower[i] = mu / (v[i] - bounds.lower[i]);
                 z_upper[i] = mu / (bounds.upper[i] - v[i]);
             }
-            State { c, z_lower, z_upper, mu, damping: 1e-3, cost: c0.cost, count: c0.count, iterations: 0, small_changes: 0, stop: None, log: Vec::new() }
+            State {
+                c,
+                z_lower,
+                z_upper,
+                mu,
+                damping: 1e-3,
+                cost: c0.cost,
+                count: c0.count,
+                iterations: 0,
+                small_changes: 0,
+                stop: None,
+                log: Vec::new(),
+            }
         })
         .collect();
 
     for _ in 0..o.max_iterations {
-        let active: Vec<usize> = (0..states.len()).filter(|&i| states[i].stop.is_none()).collect();
+        let active: Vec<usize> = (0..states.len())
+            .filter(|&i| states[i].stop.is_none())
+            .collect();
         if active.is_empty() {
             break;
         }
@@ -201,7 +239,9 @@ pub fn solve(evaluator: &mut dyn Evaluator, starts: &[Candidate], bounds: &Bound
                 }
             }
             let gmax = g.amax();
-            if gmax <= o.gradient_tolerance * s.cost.max(1e-300) && s.mu < 1e-10 * s.cost.max(1e-300) {
+            if gmax <= o.gradient_tolerance * s.cost.max(1e-300)
+                && s.mu < 1e-10 * s.cost.max(1e-300)
+            {
                 s.stop = Some(Stop::SmallGradient);
                 continue;
             }
@@ -217,7 +257,10 @@ pub fn solve(evaluator: &mut dyn Evaluator, starts: &[Candidate], bounds: &Bound
                 for k in 0..NUM_PARAMS {
                     damped[(k, k)] += s.damping * h[(k, k)].max(1e-12);
                 }
-                let step = damped.cholesky().map(|ch| ch.solve(&(-g))).unwrap_or_else(|| -g / (h.diagonal().amax().max(1e-12) * (1.0 + s.damping)));
+                let step = damped
+                    .cholesky()
+                    .map(|ch| ch.solve(&(-g)))
+                    .unwrap_or_else(|| -g / (h.diagonal().amax().max(1e-12) * (1.0 + s.damping)));
                 // fraction to the boundary: keep 0.5% of the distance to every bound
                 let v = s.c.shape.to_array();
                 let mut alpha: f64 = 1.0;
@@ -231,7 +274,8 @@ pub fn solve(evaluator: &mut dyn Evaluator, starts: &[Candidate], bounds: &Bound
                 let step: [f64; NUM_PARAMS] = std::array::from_fn(|k| alpha * step[k]);
                 trials.push((apply_step(&s.c, &step), step));
             }
-            let trial_costs = evaluator.costs(&trials.iter().map(|t| t.0).collect::<Vec<_>>(), o.loss)?;
+            let trial_costs =
+                evaluator.costs(&trials.iter().map(|t| t.0).collect::<Vec<_>>(), o.loss)?;
             let mut still = Vec::new();
             for ((entry, (trial, step)), tc) in pending.into_iter().zip(trials).zip(trial_costs) {
                 let i = entry.0;
@@ -255,8 +299,18 @@ pub fn solve(evaluator: &mut dyn Evaluator, starts: &[Candidate], bounds: &Bound
                     s.cost = tc.cost;
                     s.mu = (0.1 * gap / 12.0).max(1e-14 * tc.cost.max(1e-300));
                     s.damping = (s.damping / 3.0).max(1e-9);
-                    s.log.push(LogLine { iteration: s.iterations, cost: s.cost, mu: s.mu, damping: s.damping, step: step_norm });
-                    s.small_changes = if relative < o.cost_tolerance { s.small_changes + 1 } else { 0 };
+                    s.log.push(LogLine {
+                        iteration: s.iterations,
+                        cost: s.cost,
+                        mu: s.mu,
+                        damping: s.damping,
+                        step: step_norm,
+                    });
+                    s.small_changes = if relative < o.cost_tolerance {
+                        s.small_changes + 1
+                    } else {
+                        0
+                    };
                     if s.small_changes >= 2 {
                         s.stop = Some(Stop::CostChange);
                     } else if step_norm < o.step_tolerance {
@@ -279,6 +333,13 @@ pub fn solve(evaluator: &mut dyn Evaluator, starts: &[Candidate], bounds: &Bound
     }
     Ok(states
         .into_iter()
-        .map(|s| Solution { candidate: s.c, cost: s.cost, count: s.count, iterations: s.iterations, stop: s.stop.unwrap_or(Stop::IterationCap), log: s.log })
+        .map(|s| Solution {
+            candidate: s.c,
+            cost: s.cost,
+            count: s.count,
+            iterations: s.iterations,
+            stop: s.stop.unwrap_or(Stop::IterationCap),
+            log: s.log,
+        })
         .collect())
 }

@@ -23,8 +23,14 @@ pub struct Intrinsics {
 
 impl Intrinsics {
     /// Intel RealSense D435-like 640x480 depth stream.
-    pub const REALSENSE_640X480: Self =
-        Self { fx: 615.0, fy: 615.0, cx: 319.5, cy: 239.5, width: 640, height: 480 };
+    pub const REALSENSE_640X480: Self = Self {
+        fx: 615.0,
+        fy: 615.0,
+        cx: 319.5,
+        cy: 239.5,
+        width: 640,
+        height: 480,
+    };
 
     /// Ray direction (not unit) of pixel (u, v) in the optical frame, with z = 1.
     pub fn ray(&self, u: f64, v: f64) -> DVec3 {
@@ -37,12 +43,20 @@ impl Intrinsics {
     }
 
     pub fn validate(&self) -> Result<(), String> {
-        let ok = [self.fx, self.fy, self.cx, self.cy].iter().all(|x| x.is_finite())
+        let ok = [self.fx, self.fy, self.cx, self.cy]
+            .iter()
+            .all(|x| x.is_finite())
             && self.fx > 0.0
             && self.fy > 0.0
             && self.width > 0
             && self.height > 0;
-        if ok { Ok(()) } else { Err(format!("invalid intrinsics {self:?}: fx, fy must be > 0 and finite, width and height > 0")) }
+        if ok {
+            Ok(())
+        } else {
+            Err(format!(
+                "invalid intrinsics {self:?}: fx, fy must be > 0 and finite, width and height > 0"
+            ))
+        }
     }
 }
 
@@ -58,25 +72,46 @@ impl Camera {
     /// A camera at `eye` looking at `target`, image "up" towards `up`.
     pub fn look_at(intrinsics: Intrinsics, eye: DVec3, target: DVec3, up: DVec3) -> Self {
         let z = (target - eye).normalize();
-        let up = if z.cross(up).length() < 1e-6 { DVec3::Y } else { up };
+        let up = if z.cross(up).length() < 1e-6 {
+            DVec3::Y
+        } else {
+            up
+        };
         let x = z.cross(up).normalize();
         let y = z.cross(x);
         let rotation = DQuat::from_mat3(&DMat3::from_cols(x, y, z));
-        Self { intrinsics, pose: Pose::new(rotation, eye) }
+        Self {
+            intrinsics,
+            pose: Pose::new(rotation, eye),
+        }
     }
 
     /// A seeded random viewpoint looking at the object's centre from a random direction,
     /// at the distance where the object spans about 60% of the image height.
-    pub fn random_view(shape: &Shape, object: &Pose, intrinsics: Intrinsics, rng: &mut SeededRng) -> Self {
+    pub fn random_view(
+        shape: &Shape,
+        object: &Pose,
+        intrinsics: Intrinsics,
+        rng: &mut SeededRng,
+    ) -> Self {
         let dir = loop {
-            let v = DVec3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+            let v = DVec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
             let n = v.length();
             if n > 0.1 && n <= 1.0 {
                 break v / n;
             }
         };
         let distance = intrinsics.fy * 2.0 * shape.size() / (0.6 * intrinsics.height as f64);
-        Self::look_at(intrinsics, object.translation + dir * distance, object.translation, DVec3::Z)
+        Self::look_at(
+            intrinsics,
+            object.translation + dir * distance,
+            object.translation,
+            DVec3::Z,
+        )
     }
 }
 
@@ -123,7 +158,12 @@ pub struct RenderedView {
 /// changes by at most `lipschitz` per unit length for eps1, eps2 <= 2, so stepping by
 /// (N - 1)/lipschitz from outside never jumps over the surface: the first crossing found
 /// is the nearest one, and nothing behind it is kept.
-pub fn render_view(shape: &Shape, object: &Pose, camera: &Camera, depth_scale: f64) -> Result<RenderedView, String> {
+pub fn render_view(
+    shape: &Shape,
+    object: &Pose,
+    camera: &Camera,
+    depth_scale: f64,
+) -> Result<RenderedView, String> {
     shape.validate()?;
     camera.intrinsics.validate()?;
     if shape.eps1 > 2.0 || shape.eps2 > 2.0 {
@@ -147,7 +187,9 @@ pub fn render_view(shape: &Shape, object: &Pose, camera: &Camera, depth_scale: f
         for u in 0..k.width {
             let ray_cam = k.ray(u as f64, v as f64);
             let dir = (to_canonical * ray_cam).normalize();
-            let Some((t_in, t_out)) = ray_box(origin, dir, half) else { continue };
+            let Some((t_in, t_out)) = ray_box(origin, dir, half) else {
+                continue;
+            };
             let mut t = t_in.max(0.0);
             let mut hit = None;
             for _ in 0..20_000 {
@@ -175,7 +217,16 @@ pub fn render_view(shape: &Shape, object: &Pose, camera: &Camera, depth_scale: f
             pixels.push([u, v]);
         }
     }
-    Ok(RenderedView { points, pixels, depth: DepthImage { width: k.width, height: k.height, scale: depth_scale, data: depth } })
+    Ok(RenderedView {
+        points,
+        pixels,
+        depth: DepthImage {
+            width: k.width,
+            height: k.height,
+            scale: depth_scale,
+            data: depth,
+        },
+    })
 }
 
 /// Slab test: the parameter interval where the ray is inside the box |p_i| <= half_i.

@@ -5,7 +5,7 @@
 mod camera;
 mod sampling;
 
-pub use camera::{render_view, Camera, DepthImage, Intrinsics, RenderedView};
+pub use camera::{Camera, DepthImage, Intrinsics, RenderedView, render_view};
 pub use sampling::{add_noise, add_outliers, sample_surface, subsample};
 
 /// A seeded random generator, the same stream on every platform.

@@ -20,12 +20,19 @@ pub fn sample_surface(shape: &Shape, pose: &Pose, count: usize, rng: &mut Seeded
     let eta_max = shape.eta_range();
     let d_eta = 2.0 * eta_max / GRID as f64;
     let d_omega = 2.0 * PI / GRID as f64;
-    let corner = |i: usize, j: usize| shape.surface_point(-eta_max + i as f64 * d_eta, -PI + j as f64 * d_omega);
+    let corner = |i: usize, j: usize| {
+        shape.surface_point(-eta_max + i as f64 * d_eta, -PI + j as f64 * d_omega)
+    };
     let mut cumulative = Vec::with_capacity(GRID * GRID);
     let mut total = 0.0;
     for i in 0..GRID {
         for j in 0..GRID {
-            let (p00, p10, p01, p11) = (corner(i, j), corner(i + 1, j), corner(i, j + 1), corner(i + 1, j + 1));
+            let (p00, p10, p01, p11) = (
+                corner(i, j),
+                corner(i + 1, j),
+                corner(i, j + 1),
+                corner(i + 1, j + 1),
+            );
             let area = 0.5 * (p11 - p00).cross(p01 - p10).length();
             total += area;
             cumulative.push(total);
@@ -34,7 +41,9 @@ pub fn sample_surface(shape: &Shape, pose: &Pose, count: usize, rng: &mut Seeded
     (0..count)
         .map(|_| {
             let target = rng.random::<f64>() * total;
-            let cell = cumulative.partition_point(|&c| c < target).min(GRID * GRID - 1);
+            let cell = cumulative
+                .partition_point(|&c| c < target)
+                .min(GRID * GRID - 1);
             let (i, j) = (cell / GRID, cell % GRID);
             let eta = -eta_max + (i as f64 + rng.random::<f64>()) * d_eta;
             let omega = -PI + (j as f64 + rng.random::<f64>()) * d_omega;
@@ -56,7 +65,13 @@ pub fn add_noise(points: &mut [DVec3], sigma: f64, rng: &mut SeededRng) {
 
 /// Appends uniform outliers inside the object's oriented bounding box inflated by 10%,
 /// so that they make up `fraction` of the returned cloud (fraction in [0, 1)).
-pub fn add_outliers(points: &mut Vec<DVec3>, shape: &Shape, pose: &Pose, fraction: f64, rng: &mut SeededRng) {
+pub fn add_outliers(
+    points: &mut Vec<DVec3>,
+    shape: &Shape,
+    pose: &Pose,
+    fraction: f64,
+    rng: &mut SeededRng,
+) {
     if fraction <= 0.0 || points.is_empty() {
         return;
     }
