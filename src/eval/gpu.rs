@@ -458,6 +458,46 @@ impl GpuEvaluator {
         Ok(values)
     }
 
+    /// Runs a reduction kernel whose workgroups each write `stride` values (the last one
+    /// the completion marker) and finishes the partial sums per candidate in f64.
+    fn reduce(
+        &mut self,
+        pipeline: Pipeline,
+        stride: usize,
+        candidates: &[Candidate],
+        loss: Loss,
+    ) -> Result<Vec<Vec<f64>>, EvalError> {
+        self.require_points()?;
+        self.upload_candidates(candidates)?;
+        let k = candidates.len();
+        let groups_x = self.groups_x(k);
+        let values = k * groups_x as usize * stride;
+        self.prepare_output((values * 4) as u64)?;
+        let (code, scale) = loss.code();
+        let params = Params {
+            n_points: self.n_points,
+            n_candidates: k as u32,
+            loss: code,
+            groups_x,
+            loss_scale: scale,
+            _pad: [0.0; 3],
+        };
+        let out = self.run(pipeline, params, (groups_x, k as u32), values)?;
+        check_markers(&out, stride)?;
+        Ok(out
+            .chunks(groups_x as usize * stride)
+            .map(|partials| {
+                let mut sum = vec![0.0f64; stride - 1];
+                for part in partials.chunks(stride) {
+                    for (s, v) in sum.iter_mut().zip(part) {
+                        *s += *v as f64;
+                    }
+                }
+                sum
+            })
+            .collect())
+    }
+
     fn require_points(&self) -> Result<(), EvalError> {
         if self.n_points == 0 {
             Err(EvalError::NoPoints)
@@ -530,71 +570,20 @@ impl Evaluator for GpuEvaluator {
         candidates: &[Candidate],
         loss: Loss,
     ) -> Result<Vec<NormalEquations>, EvalError> {
-        self.require_points()?;
-        self.upload_candidates(candidates)?;
-        let k = candidates.len();
-        let groups_x = self.groups_x(k);
-        let values = k * groups_x as usize * NE_OUT;
-        self.prepare_output((values * 4) as u64)?;
-        let (code, scale) = loss.code();
-        let params = Params {
-            n_points: self.n_points,
-            n_candidates: k as u32,
-            loss: code,
-            groups_x,
-            loss_scale: scale,
-            _pad: [0.0; 3],
-        };
-        let out = self.run(
-            Pipeline::NormalEquations,
-            params,
-            (groups_x, k as u32),
-            values,
-        )?;
-        // finish the partial sums in f64
-        check_markers(&out, NE_OUT)?;
-        Ok(out
-            .chunks(groups_x as usize * NE_OUT)
-            .map(|partials| {
-                let mut sum = [0.0f64; NE];
-                for part in partials.chunks(NE_OUT) {
-                    for (s, v) in sum.iter_mut().zip(&part[..NE]) {
-                        *s += *v as f64;
-                    }
-                }
-                NormalEquations::from_packed(&sum)
-            })
+        let sums = self.reduce(Pipeline::NormalEquations, NE_OUT, candidates, loss)?;
+        Ok(sums
+            .iter()
+            .map(|s| NormalEquations::from_packed(s))
             .collect())
     }
 
     fn costs(&mut self, candidates: &[Candidate], loss: Loss) -> Result<Vec<Cost>, EvalError> {
-        self.require_points()?;
-        self.upload_candidates(candidates)?;
-        let k = candidates.len();
-        let groups_x = self.groups_x(k);
-        let values = k * groups_x as usize * COST_OUT;
-        self.prepare_output((values * 4) as u64)?;
-        let (code, scale) = loss.code();
-        let params = Params {
-            n_points: self.n_points,
-            n_candidates: k as u32,
-            loss: code,
-            groups_x,
-            loss_scale: scale,
-            _pad: [0.0; 3],
-        };
-        let out = self.run(Pipeline::Costs, params, (groups_x, k as u32), values)?;
-        check_markers(&out, COST_OUT)?;
-        Ok(out
-            .chunks(groups_x as usize * COST_OUT)
-            .map(|partials| {
-                let (cost, count) = partials
-                    .chunks(COST_OUT)
-                    .fold((0.0, 0.0), |a, p| (a.0 + p[0] as f64, a.1 + p[1] as f64));
-                Cost {
-                    cost,
-                    count: count.round() as u64,
-                }
+        let sums = self.reduce(Pipeline::Costs, COST_OUT, candidates, loss)?;
+        Ok(sums
+            .iter()
+            .map(|s| Cost {
+                cost: s[0],
+                count: s[1].round() as u64,
             })
             .collect())
     }

@@ -58,6 +58,19 @@ struct Meridian {
     l: f64,
 }
 
+/// Signed residual L - L/N and the unit section direction (X, Z)/N it uses. L/N, the
+/// section-centre-to-surface length along the ray, is |(s·X, a3·Z)|/N, taken in the x'
+/// direction at the centre itself.
+fn signed_residual(shape: &Shape, m: &Meridian) -> (f64, f64, f64) {
+    let (ux, uz) = if m.n > 0.0 {
+        (m.big_x / m.n, m.big_z / m.n)
+    } else {
+        (1.0, 0.0)
+    };
+    let reach = (m.s * ux).hypot(shape.a3 * uz);
+    (m.l - reach, ux, uz)
+}
+
 fn meridian(shape: &Shape, p: DVec3) -> Meridian {
     let rho = p.x.hypot(p.y);
     let dir = if rho > 0.0 {
@@ -87,15 +100,7 @@ fn meridian(shape: &Shape, p: DVec3) -> Meridian {
 /// superellipsoid radial distance |p|·|1 - F^(-eps1/2)|).
 pub fn meridian_distance(shape: &Shape, p: DVec3) -> MeridianPoint {
     let m = meridian(shape, p);
-    // Section-centre-to-surface length along the ray: L/N = |(s·X, a3·Z)| / N, taken in
-    // the x' direction at the centre itself.
-    let (ux, uz) = if m.n > 0.0 {
-        (m.big_x / m.n, m.big_z / m.n)
-    } else {
-        (1.0, 0.0)
-    };
-    let reach = (m.s * ux).hypot(shape.a3 * uz);
-    let signed = m.l - reach;
+    let (signed, ux, uz) = signed_residual(shape, &m);
     let centre = DVec3::new(shape.a4 * m.s * m.dir[0], shape.a4 * m.s * m.dir[1], 0.0);
     let section_dir = DVec3::new(m.s * ux * m.dir[0], m.s * ux * m.dir[1], shape.a3 * uz);
     MeridianPoint {
@@ -207,7 +212,7 @@ pub fn meridian_residual_with_gradient(shape: &Shape, p: DVec3) -> ResidualGradi
         eps2,
         ..
     } = *shape;
-    let residual = meridian_distance(shape, p).signed;
+    let residual = signed_residual(shape, &m).0;
     // At (within 1e-12 of) a section centre the ray direction is undefined: no gradient.
     if m.n < 1e-12 || m.l == 0.0 {
         return ResidualGradient {
