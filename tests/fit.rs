@@ -45,6 +45,43 @@ fn full_clouds_are_recovered_within_the_ground_truth_bounds() {
     );
 }
 
+/// Single-view partial clouds (odd seeds 1..23; noise 0/1/2% and outliers 0/5/10% by
+/// seed): a regression floor at the level measured when this was written, 4 of 12. The
+/// target of issue 4 is 95% on partial clouds with outliers; this is far from it.
+#[test]
+fn partial_clouds_regression_floor() {
+    let mut evaluator = CpuEvaluator::new();
+    let mut successes = 0;
+    for seed in (1..24u64).step_by(2) {
+        let noise = [0.0, 0.01, 0.02][(seed / 2 % 3) as usize];
+        let outliers = [0.0, 0.05, 0.1][(seed / 6 % 3) as usize];
+        let case = make_case(seed, true, noise, outliers);
+        let report = fit(
+            &mut evaluator,
+            &case.points,
+            &FitOptions {
+                seed,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let e = compare(
+            (&case.shape, &case.pose),
+            (&report.fitted.0, &report.fitted.1),
+        );
+        eprintln!(
+            "partial case {seed}: noise {noise} outliers {outliers}: {e:?} -> {}",
+            e.success()
+        );
+        successes += e.success() as usize;
+    }
+    eprintln!("partial clouds recovered: {successes} of 12");
+    assert!(
+        successes >= 4,
+        "only {successes} of 12 partial clouds recovered"
+    );
+}
+
 #[test]
 fn gpu_and_cpu_fits_agree_on_a_clean_cloud() {
     let ctx =
