@@ -2,7 +2,7 @@
 //! code 2; internal failures exit 1.
 
 use crate::eval::{Backend, Normalization, make_evaluator};
-use crate::io::{read_cloud, write_cloud};
+use crate::io::{Format, read_cloud, write_cloud};
 use crate::model::{Pose, Shape, meridian_distance};
 use crate::synth::{self, Camera, Intrinsics};
 use clap::{Args, Parser, Subcommand};
@@ -31,14 +31,63 @@ pub enum Command {
     /// Fit a supertoroid to a cloud and print the result as one JSON object (shape, pose,
     /// quality, timing, iterations, backend, points; see the README).
     ///
-    /// Example: supertoroid fit mug.xyz --seed 3 --backend cpu
+    /// Example: supertoroid fit mug.pcd --seed 3 --backend cpu --mesh fitted.ply
+    ///
+    /// Formats: .pcd (ascii, binary, binary_compressed), .ply (ascii, binary), .xyz / .txt
+    /// / .csv text, .raw float32 triples; `-` reads standard input (format sniffed, or
+    /// --format).
     Fit(FitArgs),
+    /// Write a supertoroid as a binary PLY triangle mesh with normals, from --shape (and
+    /// --translation, --quaternion) or from the JSON that `fit` printed.
+    ///
+    /// Example: supertoroid fit mug.pcd > fit.json && supertoroid mesh --fit fit.json -o mug.ply
+    Mesh(MeshArgs),
+}
+
+/// The cloud a command reads.
+#[derive(Args, Debug)]
+pub struct InputArgs {
+    /// input cloud; `-` reads standard input
+    pub file: PathBuf,
+    /// input format (default: from the extension, else sniffed from the content)
+    #[arg(long, value_enum)]
+    pub format: Option<Format>,
+}
+
+impl InputArgs {
+    fn read(&self) -> Result<Vec<glam::DVec3>, Failure> {
+        read_cloud(&self.file, self.format)
+            .map_err(|e| Failure::input(format!("{}: {e}", self.file.display())))
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct MeshArgs {
+    /// a1,a2,a3,a4,eps1,eps2 (or use --fit)
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "fit")]
+    pub shape: Option<String>,
+    #[arg(long, allow_hyphen_values = true, requires = "shape")]
+    pub translation: Option<String>,
+    /// w,x,y,z
+    #[arg(long, allow_hyphen_values = true, requires = "shape")]
+    pub quaternion: Option<String>,
+    /// the JSON object `supertoroid fit` printed (`-` for stdin)
+    #[arg(long)]
+    pub fit: Option<PathBuf>,
+    /// steps around the cross-section (eta) and around the hole axis (omega)
+    #[arg(long, default_value_t = 64)]
+    pub rings: usize,
+    #[arg(long, default_value_t = 128)]
+    pub segments: usize,
+    /// output .ply
+    #[arg(short, long)]
+    pub output: PathBuf,
 }
 
 #[derive(Args, Debug)]
 pub struct FitArgs {
-    /// input cloud (.xyz)
-    pub file: PathBuf,
+    #[command(flatten)]
+    pub input: InputArgs,
     /// seed of the random downsampling
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -53,6 +102,16 @@ pub struct FitArgs {
     /// known hole axis x,y,z in the cloud's frame (e.g. 0,0,1 for "on a table, hole up")
     #[arg(long, allow_hyphen_values = true)]
     pub axis: Option<String>,
+    /// also write the fitted surface as a PLY mesh with normals
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
+    /// also write the input points coloured by their distance to the fit (blue 0, red at
+    /// 5% of the size or more) as PLY, with the distance as a property
+    #[arg(long)]
+    pub residuals: Option<PathBuf>,
+    /// write the JSON here instead of standard output
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
 }
 
 /// Shape and pose of a supertoroid, as the CLI takes them.
@@ -110,8 +169,8 @@ pub struct DistanceArgs {
     /// when found); default from SUPERTOROID_BACKEND, else cpu
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
-    /// input cloud (.xyz)
-    pub file: PathBuf,
+    #[command(flatten)]
+    pub input: InputArgs,
 }
 
 /// A failure with its exit code: 2 for bad input, 1 for everything else.
@@ -152,6 +211,7 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
         Command::Sample(args) => sample(args),
         Command::Distance(args) => distance(args),
         Command::Fit(args) => fit(args),
+        Command::Mesh(args) => mesh(args),
     }
 }
 
@@ -184,8 +244,7 @@ fn sample(args: SampleArgs) -> Result<(), Failure> {
 
 fn distance(args: DistanceArgs) -> Result<(), Failure> {
     let (shape, pose) = args.object.parse().map_err(Failure::input)?;
-    let points = read_cloud(&args.file)
-        .map_err(|e| Failure::input(format!("{}: {e}", args.file.display())))?;
+    let points = args.input.read()?;
     let backend = args
         .backend
         .or_else(Backend::from_env)
@@ -230,8 +289,7 @@ fn distance(args: DistanceArgs) -> Result<(), Failure> {
 }
 
 fn fit(args: FitArgs) -> Result<(), Failure> {
-    let points = read_cloud(&args.file)
-        .map_err(|e| Failure::input(format!("{}: {e}", args.file.display())))?;
+    let points = args.input.read()?;
     let known_axis = match &args.axis {
         Some(a) => Some(glam::DVec3::from_array(
             crate::model::parse_floats::<3>(a, "axis x,y,z").map_err(Failure::input)?,
@@ -260,12 +318,65 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         },
         other => Failure::input(other.to_string()),
     })?;
-    println!(
-        "{}",
-        serde_json::to_string_pretty(&report).map_err(|e| Failure {
-            code: 1,
-            message: e.to_string()
-        })?
-    );
-    Ok(())
+    let (shape, pose) = report.fitted;
+    if let Some(path) = &args.mesh {
+        let mesh = crate::io::mesh::tessellate(&shape, &pose, 64, 128);
+        write_file(path, |out| crate::io::write_ply_mesh(out, &mesh))?;
+    }
+    if let Some(path) = &args.residuals {
+        let distances: Vec<f64> = points
+            .iter()
+            .map(|p| meridian_distance(&shape, pose.to_canonical(*p)).distance)
+            .collect();
+        write_file(path, |out| {
+            crate::io::write_ply_residuals(out, &points, &distances, 0.05 * shape.size())
+        })?;
+    }
+    let json = serde_json::to_string_pretty(&report).map_err(internal)?;
+    match &args.output {
+        Some(path) => write_file(path, |out| writeln!(out, "{json}")),
+        None => {
+            println!("{json}");
+            Ok(())
+        }
+    }
+}
+
+fn internal(e: impl std::fmt::Display) -> Failure {
+    Failure {
+        code: 1,
+        message: e.to_string(),
+    }
+}
+
+fn write_file(
+    path: &std::path::Path,
+    write: impl FnOnce(&mut Vec<u8>) -> std::io::Result<()>,
+) -> Result<(), Failure> {
+    let mut buf = Vec::new();
+    write(&mut buf).map_err(internal)?;
+    std::fs::write(path, buf).map_err(|e| Failure::input(format!("{}: {e}", path.display())))
+}
+
+fn mesh(args: MeshArgs) -> Result<(), Failure> {
+    let (shape, pose) = match (&args.shape, &args.fit) {
+        (Some(shape), None) => ShapePoseArgs {
+            shape: shape.clone(),
+            translation: args.translation.clone(),
+            quaternion: args.quaternion.clone(),
+        }
+        .parse()
+        .map_err(Failure::input)?,
+        (None, Some(path)) => {
+            let bytes = crate::io::read_bytes(path).map_err(|e| Failure::input(e.to_string()))?;
+            crate::fit::parse_report_json(&bytes)
+                .map_err(|e| Failure::input(format!("{}: {e}", path.display())))?
+        }
+        _ => return Err(Failure::input("give either --shape or --fit")),
+    };
+    if !(3..=4096).contains(&args.rings) || !(3..=4096).contains(&args.segments) {
+        return Err(Failure::input("--rings and --segments must be in 3..=4096"));
+    }
+    let mesh = crate::io::mesh::tessellate(&shape, &pose, args.rings, args.segments);
+    write_file(&args.output, |out| crate::io::write_ply_mesh(out, &mesh))
 }

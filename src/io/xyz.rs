@@ -1,11 +1,23 @@
-use super::CloudError;
+use super::{CloudError, ReadLimits};
 use glam::DVec3;
 use std::io::Write;
+
+/// Parses XYZ / CSV bytes (UTF-8 text), stopping at the point limit.
+pub fn parse_xyz_bytes(bytes: &[u8], limits: ReadLimits) -> Result<Vec<DVec3>, CloudError> {
+    let text = std::str::from_utf8(bytes)
+        .map_err(|e| CloudError::malformed("xyz", format!("not UTF-8 text: {e}")))?;
+    parse_xyz_limited(text, limits)
+}
+
+/// Parses XYZ / CSV text with the default limits.
+pub fn parse_xyz(text: &str) -> Result<Vec<DVec3>, CloudError> {
+    parse_xyz_limited(text, ReadLimits::default())
+}
 
 /// Parses XYZ / CSV text: one point per line, x y z separated by whitespace or commas,
 /// further columns ignored; blank lines and `#` comments skipped; one header line of
 /// non-numbers allowed as the first non-comment line.
-pub fn parse_xyz(text: &str) -> Result<Vec<DVec3>, CloudError> {
+fn parse_xyz_limited(text: &str, limits: ReadLimits) -> Result<Vec<DVec3>, CloudError> {
     let mut points = Vec::new();
     let mut seen_data = false;
     for (i, raw) in text.lines().enumerate() {
@@ -24,6 +36,12 @@ pub fn parse_xyz(text: &str) -> Result<Vec<DVec3>, CloudError> {
                 if !p.is_finite() {
                     return Err(CloudError::NonFinite {
                         index: points.len(),
+                    });
+                }
+                if points.len() == limits.max_points {
+                    return Err(CloudError::TooLarge {
+                        points: points.len() as u64 + 1,
+                        limit: limits.max_points,
                     });
                 }
                 points.push(p);

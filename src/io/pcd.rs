@@ -1,0 +1,315 @@
+//! PCD v0.7 (PCL's point cloud format): ascii, binary and binary_compressed (LZF), read
+//! through the `pcd-rs` crate.
+//!
+//! Before `pcd-rs` sees the bytes, [`PcdHeader::scan`] reads the header itself and checks
+//! every claim that decides an allocation or a slice: the field table is consistent, x, y
+//! and z exist and are numbers, POINTS = WIDTH·HEIGHT, the count is within the limits,
+//! binary data is as long as POINTS records, and a compressed block's sizes match the
+//! bytes present and the record layout. What is left for the crate is decoding.
+//!
+//! Points are looked up by field name, so any field order, extra fields (rgb, normals,
+//! `_` padding) and COUNT > 1 on other fields are fine. NaN points are dropped in
+//! organised clouds (HEIGHT > 1) and in clouds that PCL marks as not dense by their
+//! NaNs; an infinite coordinate is an error.
+
+use super::{CloudError, ReadLimits, check_count};
+use glam::DVec3;
+use pcd_rs::{DataKind, DynReader, DynRecord, Field, Schema, ValueKind, WriterInit};
+use std::io::{Seek, Write};
+
+const FORMAT: &str = "pcd";
+
+fn bad(message: impl Into<String>) -> CloudError {
+    CloudError::malformed(FORMAT, message)
+}
+
+/// What the header says, checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PcdHeader {
+    pub fields: Vec<String>,
+    pub sizes: Vec<usize>,
+    pub types: Vec<char>,
+    pub counts: Vec<usize>,
+    pub width: u64,
+    pub height: u64,
+    pub points: u64,
+    pub data: String,
+    /// byte offset of the data section
+    pub data_offset: usize,
+}
+
+impl PcdHeader {
+    /// Bytes per point record.
+    pub fn record_size(&self) -> usize {
+        self.sizes.iter().zip(&self.counts).map(|(s, c)| s * c).sum()
+    }
+
+    fn field_index(&self, name: &str) -> Option<usize> {
+        self.fields.iter().position(|f| f == name)
+    }
+
+    /// Reads and checks the header (see the module docs).
+    pub fn scan(bytes: &[u8], limits: ReadLimits) -> Result<Self, CloudError> {
+        let mut offset = 0;
+        let mut keys: std::collections::HashMap<String, Vec<String>> = Default::default();
+        let data = loop {
+            if offset >= bytes.len() {
+                return Err(bad("the header ends before its DATA line"));
+            }
+            if offset > 64 * 1024 {
+                return Err(bad("no DATA line in the first 64 KiB"));
+            }
+            let end = bytes[offset..]
+                .iter()
+                .position(|&b| b == b'\n')
+                .map(|p| offset + p + 1)
+                .unwrap_or(bytes.len());
+            let line = String::from_utf8_lossy(&bytes[offset..end]);
+            offset = end;
+            let line = line.split('#').next().unwrap_or("");
+            let mut tokens = line.split_ascii_whitespace();
+            let Some(key) = tokens.next() else { continue };
+            let key = key.to_ascii_uppercase();
+            let values: Vec<String> = tokens.map(str::to_owned).collect();
+            if key == "DATA" {
+                break values.first().cloned().unwrap_or_default().to_ascii_lowercase();
+            }
+            keys.insert(key, values);
+        };
+        let list = |key: &str| -> Result<Vec<String>, CloudError> {
+            keys.get(key)
+                .cloned()
+                .ok_or_else(|| bad(format!("the header has no {key} line")))
+        };
+        let number = |key: &str| -> Result<u64, CloudError> {
+            let v = list(key)?;
+            v.first()
+                .and_then(|s| s.parse::<u64>().ok())
+                .ok_or_else(|| bad(format!("{key} is not a non-negative integer: {v:?}")))
+        };
+        let fields = list("FIELDS")?;
+        let n = fields.len();
+        let sizes = list("SIZE")?
+            .iter()
+            .map(|s| s.parse::<usize>().map_err(|_| bad(format!("bad SIZE {s:?}"))))
+            .collect::<Result<Vec<_>, _>>()?;
+        let types = list("TYPE")?
+            .iter()
+            .map(|s| {
+                let c = s.to_ascii_uppercase();
+                match c.as_str() {
+                    "F" | "I" | "U" => Ok(c.chars().next().unwrap()),
+                    _ => Err(bad(format!("unknown field type {s:?} (F, I or U)"))),
+                }
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let counts = match keys.get("COUNT") {
+            Some(c) => c
+                .iter()
+                .map(|s| {
+                    s.parse::<usize>()
+                        .ok()
+                        .filter(|&c| (1..=4096).contains(&c))
+                        .ok_or_else(|| bad(format!("bad COUNT {s:?}")))
+                })
+                .collect::<Result<Vec<_>, _>>()?,
+            None => vec![1; n],
+        };
+        if sizes.len() != n || types.len() != n || counts.len() != n {
+            return Err(bad(format!(
+                "FIELDS has {n} entries but SIZE has {}, TYPE {}, COUNT {}",
+                sizes.len(),
+                types.len(),
+                counts.len()
+            )));
+        }
+        for ((f, &s), &t) in fields.iter().zip(&sizes).zip(&types) {
+            let ok = match t {
+                'F' => s == 4 || s == 8,
+                _ => matches!(s, 1 | 2 | 4 | 8),
+            };
+            if !ok {
+                return Err(bad(format!("field {f}: type {t} with size {s} is not supported")));
+            }
+        }
+        let width = number("WIDTH")?;
+        let height = keys.get("HEIGHT").map(|_| number("HEIGHT")).transpose()?.unwrap_or(1);
+        let points = match keys.get("POINTS") {
+            Some(_) => number("POINTS")?,
+            None => width.saturating_mul(height),
+        };
+        if width.checked_mul(height) != Some(points) {
+            return Err(bad(format!(
+                "POINTS {points} does not equal WIDTH {width} x HEIGHT {height}"
+            )));
+        }
+        check_count(points, limits)?;
+        let header = PcdHeader {
+            fields,
+            sizes,
+            types,
+            counts,
+            width,
+            height,
+            points,
+            data,
+            data_offset: offset,
+        };
+        for axis in ["x", "y", "z"] {
+            let i = header
+                .field_index(axis)
+                .ok_or_else(|| bad(format!("no {axis} field (FIELDS {:?})", header.fields)))?;
+            if header.counts[i] != 1 {
+                return Err(bad(format!("field {axis} has COUNT {}", header.counts[i])));
+            }
+        }
+        let body = &bytes[offset..];
+        let expected = (points as usize).saturating_mul(header.record_size());
+        match header.data.as_str() {
+            "ascii" => {}
+            "binary" => {
+                if body.len() < expected {
+                    return Err(bad(format!(
+                        "truncated binary data: {} bytes for {points} points of {} bytes",
+                        body.len(),
+                        header.record_size()
+                    )));
+                }
+            }
+            "binary_compressed" => {
+                if body.len() < 8 {
+                    return Err(bad("truncated binary_compressed block sizes"));
+                }
+                let compressed = u32::from_le_bytes(body[0..4].try_into().unwrap()) as usize;
+                let uncompressed = u32::from_le_bytes(body[4..8].try_into().unwrap()) as usize;
+                if compressed > body.len() - 8 {
+                    return Err(bad(format!(
+                        "truncated compressed data: the block claims {compressed} bytes, {} present",
+                        body.len() - 8
+                    )));
+                }
+                if uncompressed != expected {
+                    return Err(bad(format!(
+                        "the compressed block decompresses to {uncompressed} bytes, but {points} points of {} bytes need {expected}",
+                        header.record_size()
+                    )));
+                }
+            }
+            other => return Err(bad(format!("unknown DATA kind {other:?}"))),
+        }
+        Ok(header)
+    }
+}
+
+/// The first value of a PCD field as f64.
+fn field_value(field: &Field) -> Option<f64> {
+    Some(match field {
+        Field::F32(v) => *v.first()? as f64,
+        Field::F64(v) => *v.first()?,
+        Field::I8(v) => *v.first()? as f64,
+        Field::I16(v) => *v.first()? as f64,
+        Field::I32(v) => *v.first()? as f64,
+        Field::I64(v) => *v.first()? as f64,
+        Field::U8(v) => *v.first()? as f64,
+        Field::U16(v) => *v.first()? as f64,
+        Field::U32(v) => *v.first()? as f64,
+        Field::U64(v) => *v.first()? as f64,
+    })
+}
+
+/// Parses a PCD file held in memory.
+pub fn parse_pcd(bytes: &[u8], limits: ReadLimits) -> Result<Vec<DVec3>, CloudError> {
+    let header = PcdHeader::scan(bytes, limits)?;
+    let index = |name| header.field_index(name).unwrap();
+    let (ix, iy, iz) = (index("x"), index("y"), index("z"));
+    let reader = DynReader::from_bytes(bytes).map_err(|e| bad(e.to_string()))?;
+    if reader.meta().num_points != header.points {
+        return Err(bad("the header could not be read consistently"));
+    }
+    let mut points = Vec::with_capacity(header.points as usize);
+    for (i, record) in reader.enumerate() {
+        let DynRecord(fields) = record.map_err(|e| bad(format!("point {i}: {e}")))?;
+        let value = |k: usize| {
+            fields
+                .get(k)
+                .and_then(field_value)
+                .ok_or_else(|| bad(format!("point {i}: field {k} missing")))
+        };
+        let p = DVec3::new(value(ix)?, value(iy)?, value(iz)?);
+        if p.is_nan() {
+            // PCL's "no return" in organised and non-dense clouds
+            continue;
+        }
+        if !p.is_finite() {
+            return Err(CloudError::NonFinite { index: i });
+        }
+        points.push(p);
+    }
+    if points.is_empty() && header.points > 0 {
+        return Err(bad("every point is NaN"));
+    }
+    Ok(points)
+}
+
+/// Which PCD data section to write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PcdData {
+    Ascii,
+    Binary,
+    BinaryCompressed,
+}
+
+/// Writes x, y, z as F4 fields (or F8 with `double`) through `pcd-rs`.
+pub fn write_pcd<W: Write + Seek>(
+    out: W,
+    points: &[DVec3],
+    data: PcdData,
+    double: bool,
+) -> Result<(), CloudError> {
+    let kind = if double { ValueKind::F64 } else { ValueKind::F32 };
+    let schema: Schema = [("x", kind, 1), ("y", kind, 1), ("z", kind, 1)]
+        .into_iter()
+        .collect();
+    let data_kind = match data {
+        PcdData::Ascii => DataKind::Ascii,
+        PcdData::Binary => DataKind::Binary,
+        PcdData::BinaryCompressed => DataKind::BinaryCompressed,
+    };
+    let io = |e: pcd_rs::Error| CloudError::Io(e.to_string());
+    let mut writer = WriterInit {
+        width: points.len() as u64,
+        height: 1,
+        viewpoint: Default::default(),
+        data_kind,
+        schema: Some(schema),
+        version: None,
+    }
+    .build_from_writer::<DynRecord, _>(out)
+    .map_err(io)?;
+    for p in points {
+        let record = if double {
+            DynRecord(vec![
+                Field::F64(vec![p.x]),
+                Field::F64(vec![p.y]),
+                Field::F64(vec![p.z]),
+            ])
+        } else {
+            DynRecord(vec![
+                Field::F32(vec![p.x as f32]),
+                Field::F32(vec![p.y as f32]),
+                Field::F32(vec![p.z as f32]),
+            ])
+        };
+        writer.push(&record).map_err(io)?;
+    }
+    writer.finish().map_err(io)
+}
+
+/// Binary F4 PCD into a byte vector (what `write_cloud` uses for `.pcd`).
+pub fn write_pcd_binary(out: &mut Vec<u8>, points: &[DVec3]) -> std::io::Result<()> {
+    let mut cursor = std::io::Cursor::new(Vec::new());
+    write_pcd(&mut cursor, points, PcdData::Binary, false)
+        .map_err(|e| std::io::Error::other(e.to_string()))?;
+    out.extend_from_slice(&cursor.into_inner());
+    Ok(())
+}
