@@ -13,7 +13,9 @@ use supertoroid::model::{Pose, Shape, meridian_distance};
 use supertoroid::synth::{self, Camera, Intrinsics};
 
 fn paper(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/clouds/paper").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/clouds/paper")
+        .join(name)
 }
 
 const PAPER_CLOUDS: [&str; 4] = [
@@ -51,13 +53,20 @@ fn every_paper_cloud_loads_with_its_header_point_count() {
                 (lo.min(*p), hi.max(*p))
             });
         assert!((hi - lo).min_element() > 0.0, "{name}: {lo} {hi}");
-        eprintln!("{name}: {} points, {} data, extent {}", points.len(), header.data, hi - lo);
+        eprintln!(
+            "{name}: {} points, {} data, extent {}",
+            points.len(),
+            header.data,
+            hi - lo
+        );
     }
     let kinds: Vec<String> = PAPER_CLOUDS
         .iter()
         .map(|n| PcdHeader::scan(&read_paper(n), limits()).unwrap().data)
         .collect();
-    assert!(kinds.contains(&"ascii".to_string()) && kinds.contains(&"binary_compressed".to_string()));
+    assert!(
+        kinds.contains(&"ascii".to_string()) && kinds.contains(&"binary_compressed".to_string())
+    );
 }
 
 fn resave(points: &[DVec3], data: PcdData, double: bool) -> Vec<DVec3> {
@@ -83,7 +92,10 @@ fn compressed_binary_and_ascii_saves_give_the_same_numbers() {
 
 fn sample_points() -> Vec<DVec3> {
     let shape = Shape::new(0.05, 0.04, 0.02, 2.0, 0.7, 1.3);
-    let pose = Pose::new(glam::DQuat::from_rotation_x(0.4), DVec3::new(0.1, -0.2, 0.7));
+    let pose = Pose::new(
+        glam::DQuat::from_rotation_x(0.4),
+        DVec3::new(0.1, -0.2, 0.7),
+    );
     synth::sample_surface(&shape, &pose, 500, &mut synth::rng(1))
 }
 
@@ -100,15 +112,28 @@ fn every_writer_reads_back_through_its_reader() {
     let points = sample_points();
     let dir = std::env::temp_dir().join(format!("supertoroid-io-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    for (ext, exact) in [("xyz", true), ("ply", false), ("pcd", false), ("raw", false)] {
+    for (ext, exact) in [
+        ("xyz", true),
+        ("ply", false),
+        ("pcd", false),
+        ("raw", false),
+    ] {
         let path = dir.join(format!("cloud.{ext}"));
         supertoroid::io::write_cloud(&path, &points).unwrap();
         let back = supertoroid::io::read_cloud(&path, None).unwrap();
-        let expected = if exact { points.clone() } else { as_f32(&points) };
+        let expected = if exact {
+            points.clone()
+        } else {
+            as_f32(&points)
+        };
         assert_eq!(back, expected, "{ext}");
         // and sniffed without the extension's help
         let bytes = std::fs::read(&path).unwrap();
-        assert_eq!(parse_cloud(&bytes, None, limits()).unwrap(), expected, "{ext} sniffed");
+        assert_eq!(
+            parse_cloud(&bytes, None, limits()).unwrap(),
+            expected,
+            "{ext} sniffed"
+        );
     }
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -151,7 +176,11 @@ fn handmade_ply(points: &[DVec3], encoding: &str, coord: &str) -> Vec<u8> {
     } else {
         out.push(3);
         for i in [0i32, 1, 2] {
-            out.extend_from_slice(&if big { i.to_be_bytes() } else { i.to_le_bytes() });
+            out.extend_from_slice(&if big {
+                i.to_be_bytes()
+            } else {
+                i.to_le_bytes()
+            });
         }
     }
     out
@@ -165,10 +194,17 @@ fn ply_reads_ascii_little_and_big_endian_float_and_double() {
             let bytes = handmade_ply(&points, encoding, coord);
             let back = parse_cloud(&bytes, Some(Format::Ply), limits())
                 .unwrap_or_else(|e| panic!("{encoding} {coord}: {e}"));
-            let expected = if coord == "double" { points.clone() } else { as_f32(&points) };
+            let expected = if coord == "double" {
+                points.clone()
+            } else {
+                as_f32(&points)
+            };
             assert_eq!(back.len(), points.len());
             for (a, b) in back.iter().zip(&expected) {
-                assert!((*a - *b).abs().max_element() <= 1e-12 * (1.0 + b.length()), "{encoding} {coord}: {a} vs {b}");
+                assert!(
+                    (*a - *b).abs().max_element() <= 1e-12 * (1.0 + b.length()),
+                    "{encoding} {coord}: {a} vs {b}"
+                );
             }
         }
     }
@@ -182,7 +218,17 @@ fn xyz_csv_with_header_and_raw_float32() {
         vec![DVec3::new(1.0, 2.0, 3.0), DVec3::new(4.5, -6.0, 0.7)]
     );
     let mut raw = Vec::new();
-    for v in [1.0f32, 2.0, 3.0, f32::NAN, f32::NAN, f32::NAN, -1.0, 0.5, 0.25] {
+    for v in [
+        1.0f32,
+        2.0,
+        3.0,
+        f32::NAN,
+        f32::NAN,
+        f32::NAN,
+        -1.0,
+        0.5,
+        0.25,
+    ] {
         raw.extend_from_slice(&v.to_le_bytes());
     }
     // NaN triples are "no return" in ROS clouds and are dropped
@@ -195,7 +241,10 @@ fn xyz_csv_with_header_and_raw_float32() {
 /// A known supertoroid seen by a RealSense-like camera (0.1 mm depth units).
 fn rendered_frame() -> (Shape, Pose, Camera, supertoroid::synth::DepthImage) {
     let shape = Shape::new(0.06, 0.05, 0.025, 1.8, 0.8, 1.0);
-    let pose = Pose::new(glam::DQuat::from_rotation_x(0.3), DVec3::new(0.02, -0.01, 0.6));
+    let pose = Pose::new(
+        glam::DQuat::from_rotation_x(0.3),
+        DVec3::new(0.02, -0.01, 0.6),
+    );
     let camera = Camera::look_at(
         Intrinsics::REALSENSE_640X480,
         DVec3::new(0.0, -0.25, 0.25),
@@ -234,18 +283,27 @@ fn a_rendered_depth_png_back_projects_onto_the_surface() {
         .map(|c| meridian_distance(&shape, pose.to_canonical(camera.pose.to_world(*c))).distance)
         .fold(0.0, f64::max);
     // 0.1 mm depth quantisation, seen at grazing angles
-    assert!(worst < 0.002 * shape.size() + 2e-4, "worst distance {worst}");
+    assert!(
+        worst < 0.002 * shape.size() + 2e-4,
+        "worst distance {worst}"
+    );
 
     // raw u16 gives the same cloud; ROI, mask and range select subsets
     let raw: Vec<u8> = image.data.iter().flat_map(|v| v.to_le_bytes()).collect();
     let from_raw = depth::decode_depth_raw(&raw, 640, 480, image.scale, limits()).unwrap();
     assert_eq!(from_raw, image);
     let mut opts = options_of(&camera, image.scale);
-    opts.roi = Some(Roi { x: 0, y: 0, width: 320, height: 480 });
+    opts.roi = Some(Roi {
+        x: 0,
+        y: 0,
+        width: 320,
+        height: 480,
+    });
     let left = depth::back_project(&image, &opts, None).unwrap();
     assert!(left.len() < cloud.len() && left.iter().all(|p| p.x < 0.0 + 1e-9 || p.z > 0.0));
     let mask: Vec<bool> = (0..640 * 480).map(|i| i % 640 >= 320).collect();
-    let right = depth::back_project(&image, &options_of(&camera, image.scale), Some(&mask)).unwrap();
+    let right =
+        depth::back_project(&image, &options_of(&camera, image.scale), Some(&mask)).unwrap();
     assert_eq!(left.len() + right.len(), cloud.len());
     let mut opts = options_of(&camera, image.scale);
     let zs: Vec<f64> = cloud.iter().map(|p| p.z).collect();
@@ -263,7 +321,10 @@ fn fitting_a_rendered_depth_frame_recovers_the_object() {
     let world: Vec<DVec3> = cloud.iter().map(|c| camera.pose.to_world(*c)).collect();
     let mut evaluator = supertoroid::eval::CpuEvaluator::new();
     let report = supertoroid::fit::fit(&mut evaluator, &world, &Default::default()).unwrap();
-    let e = supertoroid::fit::ground_truth::compare((&shape, &pose), (&report.fitted.0, &report.fitted.1));
+    let e = supertoroid::fit::ground_truth::compare(
+        (&shape, &pose),
+        (&report.fitted.0, &report.fitted.1),
+    );
     assert!(e.success(), "{e:?}");
 }
 
@@ -284,19 +345,36 @@ fn malformed_clouds_are_errors_that_name_the_problem() {
     let gear = read_paper("gearclean.pcd");
     let header_end = PcdHeader::scan(&gear, limits()).unwrap().data_offset;
     // truncated at every region: header, block sizes, compressed data
-    for cut in [10, header_end - 3, header_end + 5, header_end + 100, gear.len() - 1] {
-        expect_malformed(parse_cloud(&gear[..cut], Some(Format::Pcd), limits()), &format!("gear cut at {cut}"));
+    for cut in [
+        10,
+        header_end - 3,
+        header_end + 5,
+        header_end + 100,
+        gear.len() - 1,
+    ] {
+        expect_malformed(
+            parse_cloud(&gear[..cut], Some(Format::Pcd), limits()),
+            &format!("gear cut at {cut}"),
+        );
     }
     let text = String::from_utf8_lossy(&gear[..header_end]).into_owned();
     let body = &gear[header_end..];
     let with_header = |h: String| [h.into_bytes(), body.to_vec()].concat();
     let m = expect_malformed(
-        parse_cloud(&with_header(text.replace("POINTS 2445", "POINTS 2444")), None, limits()),
+        parse_cloud(
+            &with_header(text.replace("POINTS 2445", "POINTS 2444")),
+            None,
+            limits(),
+        ),
         "POINTS mismatch",
     );
     assert!(m.contains("WIDTH"), "{m}");
     let m = expect_malformed(
-        parse_cloud(&with_header(text.replace("TYPE F F F U", "TYPE F F F Q")), None, limits()),
+        parse_cloud(
+            &with_header(text.replace("TYPE F F F U", "TYPE F F F Q")),
+            None,
+            limits(),
+        ),
         "unknown type",
     );
     assert!(m.contains("unknown field type"), "{m}");
@@ -305,11 +383,17 @@ fn malformed_clouds_are_errors_that_name_the_problem() {
     for i in (header_end + 8..corrupt.len()).step_by(7) {
         corrupt[i] = 0xff;
     }
-    expect_malformed(parse_cloud(&corrupt, Some(Format::Pcd), limits()), "corrupt LZF");
+    expect_malformed(
+        parse_cloud(&corrupt, Some(Format::Pcd), limits()),
+        "corrupt LZF",
+    );
     // a huge claimed count is refused before any allocation
     let m = expect_malformed(
         parse_cloud(
-            &with_header(text.replace("WIDTH 2445", "WIDTH 4000000000").replace("POINTS 2445", "POINTS 4000000000")),
+            &with_header(
+                text.replace("WIDTH 2445", "WIDTH 4000000000")
+                    .replace("POINTS 2445", "POINTS 4000000000"),
+            ),
             None,
             limits(),
         ),
@@ -324,9 +408,15 @@ fn malformed_clouds_are_errors_that_name_the_problem() {
     expect_malformed(parse_cloud(pcd_inf, None, limits()), "pcd inf");
     // empty input, a header without points, wrong shapes
     assert_eq!(parse_cloud(b"", None, limits()), Err(CloudError::Empty));
-    expect_malformed(parse_cloud(b"\n\n# nothing\n", Some(Format::Xyz), limits()), "blank xyz");
+    expect_malformed(
+        parse_cloud(b"\n\n# nothing\n", Some(Format::Xyz), limits()),
+        "blank xyz",
+    );
     expect_malformed(parse_cloud(b"1 2\n", None, limits()), "two columns");
-    expect_malformed(parse_cloud(&[0u8; 13], Some(Format::Raw), limits()), "raw length");
+    expect_malformed(
+        parse_cloud(&[0u8; 13], Some(Format::Raw), limits()),
+        "raw length",
+    );
     expect_malformed(parse_cloud(b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nend_header\n1 2\n3 4\n", None, limits()), "ply without z");
     expect_malformed(parse_cloud(b"ply\nformat binary_little_endian 1.0\nelement vertex 100\nproperty float x\nproperty float y\nproperty float z\nend_header\n\x00\x00", None, limits()), "truncated ply");
     let mut organised = b"VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 2\nPOINTS 4\nDATA ascii\n".to_vec();
@@ -348,7 +438,10 @@ fn bad_depth_frames_and_intrinsics_are_errors() {
         let mut enc = png::Encoder::new(&mut eight, 4, 4);
         enc.set_color(png::ColorType::Grayscale);
         enc.set_depth(png::BitDepth::Eight);
-        enc.write_header().unwrap().write_image_data(&[9u8; 16]).unwrap();
+        enc.write_header()
+            .unwrap()
+            .write_image_data(&[9u8; 16])
+            .unwrap();
     }
     let e = depth::decode_depth_png(&eight, 0.001, None, limits()).unwrap_err();
     assert!(e.to_string().contains("16-bit grayscale"), "{e}");
@@ -365,11 +458,25 @@ fn bad_depth_frames_and_intrinsics_are_errors() {
         assert_eq!(e.code(), "invalid_depth_options", "{e}");
     }
     let mut opts = options_of(&camera, 0.001);
-    opts.roi = Some(Roi { x: 600, y: 0, width: 100, height: 10 });
-    assert_eq!(depth::back_project(&image, &opts, None).unwrap_err().code(), "invalid_depth_options");
+    opts.roi = Some(Roi {
+        x: 600,
+        y: 0,
+        width: 100,
+        height: 10,
+    });
+    assert_eq!(
+        depth::back_project(&image, &opts, None).unwrap_err().code(),
+        "invalid_depth_options"
+    );
     // all-zero depth
-    let zero = supertoroid::synth::DepthImage { data: vec![0; image.data.len()], ..image.clone() };
-    assert_eq!(depth::back_project(&zero, &options_of(&camera, 0.001), None), Err(CloudError::NoValidDepth));
+    let zero = supertoroid::synth::DepthImage {
+        data: vec![0; image.data.len()],
+        ..image.clone()
+    };
+    assert_eq!(
+        depth::back_project(&zero, &options_of(&camera, 0.001), None),
+        Err(CloudError::NoValidDepth)
+    );
 }
 
 fn mutate(mut bytes: Vec<u8>, edits: &[(usize, u8)], cut: Option<usize>) -> Vec<u8> {
@@ -388,7 +495,9 @@ fn mutate(mut bytes: Vec<u8>, edits: &[(usize, u8)], cut: Option<usize>) -> Vec<
 
 fn every_parser(bytes: &[u8]) {
     // each parser directly (not through parse_cloud's panic guard): none may panic
-    let l = ReadLimits { max_points: 100_000 };
+    let l = ReadLimits {
+        max_points: 100_000,
+    };
     let _ = parse_pcd(bytes, l);
     let _ = supertoroid::io::ply::parse_ply(bytes, l);
     let _ = supertoroid::io::xyz::parse_xyz_bytes(bytes, l);
@@ -425,5 +534,15 @@ proptest! {
 
 fn rendered_frame_small() -> ((), (), (), supertoroid::synth::DepthImage) {
     let data = (0..64u16).map(|i| i * 1000).collect();
-    ((), (), (), supertoroid::synth::DepthImage { width: 8, height: 8, scale: 0.001, data })
+    (
+        (),
+        (),
+        (),
+        supertoroid::synth::DepthImage {
+            width: 8,
+            height: 8,
+            scale: 0.001,
+            data,
+        },
+    )
 }

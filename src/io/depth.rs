@@ -16,8 +16,7 @@ fn bad(message: impl Into<String>) -> CloudError {
 }
 
 /// Pinhole intrinsics of the depth stream in pixels (OpenCV convention).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[derive(utoipa::ToSchema)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct PinholeIntrinsics {
     pub fx: f64,
     pub fy: f64,
@@ -26,8 +25,7 @@ pub struct PinholeIntrinsics {
 }
 
 /// A rectangle of pixels: columns x..x+width, rows y..y+height.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[derive(utoipa::ToSchema)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct Roi {
     pub x: u32,
     pub y: u32,
@@ -36,8 +34,7 @@ pub struct Roi {
 }
 
 /// How to turn a depth frame into a cloud.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[derive(utoipa::ToSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct DepthOptions {
     pub intrinsics: PinholeIntrinsics,
     /// metres (or the caller's unit) per depth unit; 0.001 for RealSense D400
@@ -165,7 +162,9 @@ pub fn decode_mask_png(
     let (w, h, bit_depth, color, data) = decode_png(bytes, limits)?;
     check_size(w, h, Some((width, height))).map_err(|e| bad(format!("mask: {e}")))?;
     match (color, bit_depth) {
-        (png::ColorType::Grayscale, png::BitDepth::Eight) => Ok(data.iter().map(|&v| v != 0).collect()),
+        (png::ColorType::Grayscale, png::BitDepth::Eight) => {
+            Ok(data.iter().map(|&v| v != 0).collect())
+        }
         (png::ColorType::Grayscale, png::BitDepth::Sixteen) => Ok(data
             .chunks_exact(2)
             .map(|c| c[0] != 0 || c[1] != 0)
@@ -196,7 +195,8 @@ fn decode_png(bytes: &[u8], limits: ReadLimits) -> Result<Decoded, CloudError> {
     });
     let mut reader = decoder.read_info().map_err(png_err)?;
     let info = reader.info();
-    let (width, height, bit_depth, color) = (info.width, info.height, info.bit_depth, info.color_type);
+    let (width, height, bit_depth, color) =
+        (info.width, info.height, info.bit_depth, info.color_type);
     super::check_count(width as u64 * height as u64, limits)?;
     let size = reader
         .output_buffer_size()
@@ -216,7 +216,9 @@ pub fn encode_depth_png(image: &DepthImage) -> Vec<u8> {
         encoder.set_depth(png::BitDepth::Sixteen);
         let mut writer = encoder.write_header().expect("PNG header into memory");
         let bytes: Vec<u8> = image.data.iter().flat_map(|v| v.to_be_bytes()).collect();
-        writer.write_image_data(&bytes).expect("PNG data into memory");
+        writer
+            .write_image_data(&bytes)
+            .expect("PNG data into memory");
     }
     out
 }

@@ -41,7 +41,11 @@ pub struct PcdHeader {
 impl PcdHeader {
     /// Bytes per point record.
     pub fn record_size(&self) -> usize {
-        self.sizes.iter().zip(&self.counts).map(|(s, c)| s * c).sum()
+        self.sizes
+            .iter()
+            .zip(&self.counts)
+            .map(|(s, c)| s * c)
+            .sum()
     }
 
     fn field_index(&self, name: &str) -> Option<usize> {
@@ -72,7 +76,11 @@ impl PcdHeader {
             let key = key.to_ascii_uppercase();
             let values: Vec<String> = tokens.map(str::to_owned).collect();
             if key == "DATA" {
-                break values.first().cloned().unwrap_or_default().to_ascii_lowercase();
+                break values
+                    .first()
+                    .cloned()
+                    .unwrap_or_default()
+                    .to_ascii_lowercase();
             }
             keys.insert(key, values);
         };
@@ -91,7 +99,10 @@ impl PcdHeader {
         let n = fields.len();
         let sizes = list("SIZE")?
             .iter()
-            .map(|s| s.parse::<usize>().map_err(|_| bad(format!("bad SIZE {s:?}"))))
+            .map(|s| {
+                s.parse::<usize>()
+                    .map_err(|_| bad(format!("bad SIZE {s:?}")))
+            })
             .collect::<Result<Vec<_>, _>>()?;
         let types = list("TYPE")?
             .iter()
@@ -129,11 +140,17 @@ impl PcdHeader {
                 _ => matches!(s, 1 | 2 | 4 | 8),
             };
             if !ok {
-                return Err(bad(format!("field {f}: type {t} with size {s} is not supported")));
+                return Err(bad(format!(
+                    "field {f}: type {t} with size {s} is not supported"
+                )));
             }
         }
         let width = number("WIDTH")?;
-        let height = keys.get("HEIGHT").map(|_| number("HEIGHT")).transpose()?.unwrap_or(1);
+        let height = keys
+            .get("HEIGHT")
+            .map(|_| number("HEIGHT"))
+            .transpose()?
+            .unwrap_or(1);
         let points = match keys.get("POINTS") {
             Some(_) => number("POINTS")?,
             None => width.saturating_mul(height),
@@ -266,7 +283,11 @@ pub fn write_pcd<W: Write + Seek>(
     data: PcdData,
     double: bool,
 ) -> Result<(), CloudError> {
-    let kind = if double { ValueKind::F64 } else { ValueKind::F32 };
+    let kind = if double {
+        ValueKind::F64
+    } else {
+        ValueKind::F32
+    };
     let schema: Schema = [("x", kind, 1), ("y", kind, 1), ("z", kind, 1)]
         .into_iter()
         .collect();

@@ -58,7 +58,9 @@ pub fn parse_ply(bytes: &[u8], limits: ReadLimits) -> Result<Vec<DVec3>, CloudEr
     let mut reader = Reader::new(std::io::BufReader::new(bytes));
     let vertex_parser = Parser::<Vertex>::new();
     let skip_parser = Parser::<Skipped>::new();
-    let header = vertex_parser.read_header(&mut reader).map_err(|e| bad(&e))?;
+    let header = vertex_parser
+        .read_header(&mut reader)
+        .map_err(|e| bad(&e))?;
     let Some(vertex_def) = header.elements.get("vertex") else {
         return Err(CloudError::malformed(FORMAT, "no vertex element"));
     };
@@ -165,7 +167,11 @@ pub fn write_ply_residuals(
 
 /// A blue-green-red ramp for t in [0, 1].
 pub fn colormap(t: f64) -> [u8; 3] {
-    let t = if t.is_finite() { t.clamp(0.0, 1.0) } else { 1.0 };
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
     let (r, g, b) = if t < 0.5 {
         (0.0, 2.0 * t, 1.0 - 2.0 * t)
     } else {
@@ -180,12 +186,7 @@ pub fn write_ply_mesh(out: &mut impl Write, mesh: &Mesh) -> std::io::Result<()> 
         out,
         mesh.vertices.len(),
         &[
-            "float x",
-            "float y",
-            "float z",
-            "float nx",
-            "float ny",
-            "float nz",
+            "float x", "float y", "float z", "float nx", "float ny", "float nz",
         ],
     )?;
     writeln!(

@@ -56,9 +56,10 @@ pub struct SolverOptions {
     /// times the cost
     pub gradient_tolerance: f64,
     pub loss: Loss,
-    /// linear reward -w·a4·count added to the cost: favours a larger a4 (a wider hole),
-    /// the paper's stage-2 term for partial clouds
-    pub a4_reward: f64,
+    /// linear shape prior: count·Σ w_k·shape_k is added to the cost. A negative weight
+    /// on a4 is the paper's stage-2 reward for a wider hole on partial clouds; a positive
+    /// weight on a3 favours the thinnest section the data allow.
+    pub shape_prior: [f64; 6],
     /// optional mask of parameters held fixed (true = fixed), e.g. a known hole axis
     pub fixed: [bool; NUM_PARAMS],
 }
@@ -71,7 +72,7 @@ impl Default for SolverOptions {
             step_tolerance: 1e-8,
             gradient_tolerance: 1e-9,
             loss: Loss::Squared,
-            a4_reward: 0.0,
+            shape_prior: [0.0; 6],
             fixed: [false; NUM_PARAMS],
         }
     }
@@ -131,7 +132,13 @@ fn barrier(shape: &Shape, b: &Bounds, mu: f64) -> f64 {
 }
 
 fn merit(cost: f64, count: u64, shape: &Shape, b: &Bounds, mu: f64, o: &SolverOptions) -> f64 {
-    cost - o.a4_reward * shape.a4 * count as f64 + barrier(shape, b, mu)
+    let prior: f64 = shape
+        .to_array()
+        .iter()
+        .zip(&o.shape_prior)
+        .map(|(v, w)| v * w)
+        .sum();
+    cost + prior * count as f64 + barrier(shape, b, mu)
 }
 
 /// Applies a parameter step: shape and translation additively, rotation on the manifold.
@@ -221,7 +228,9 @@ pub fn solve(
             s.iterations += 1;
             let mut h = Mat12::from_fn(|a, b| ne.jtj[a][b]);
             let mut g = Vec12::from_fn(|a, _| ne.jtr[a]);
-            g[3] -= o.a4_reward * ne.count as f64;
+            for k in 0..6 {
+                g[k] += o.shape_prior[k] * ne.count as f64;
+            }
             let v = s.c.shape.to_array();
             for k in 0..6 {
                 let (dl, du) = (v[k] - bounds.lower[k], bounds.upper[k] - v[k]);

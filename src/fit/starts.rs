@@ -1,0 +1,182 @@
+//! Initial hole axes and shapes for stage 1.
+//!
+//! The paper starts from the cloud's x, y and z axes at the centroid. On a single-view
+//! cloud the centroid lies on the visible skin, not on the axis, and the principal axes
+//! follow the visible patch, so those starts are often in the wrong basin. A better
+//! estimate comes from the normals: every normal line of a surface of revolution meets
+//! its axis (a supertoroid with a1 ≈ a2 and eps2 ≈ 1 is one, and others are close). A
+//! line (p, n) meets the axis (direction d, moment m = c × d) when
+//! d·(p × n) + n·m = 0 (Plücker coordinates), which is linear in (d, m): the axis is the
+//! smallest generalised eigenvector of a 6×6 moment matrix (Pottmann's linear-complex
+//! fit), made robust by reweighting. Its distances give the radii: the outer and inner
+//! radius of the points around the axis are a(1 + a4) and a(a4 - 1).
+
+use crate::eval::Candidate;
+use crate::model::{Pose, Shape};
+use glam::{DMat3, DQuat, DVec3};
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
+
+/// Unit normals by local PCA over the k nearest neighbours (brute force: the stage-1
+/// sample is a few hundred points). Orientation is arbitrary, which the line fit ignores.
+pub fn estimate_normals(points: &[DVec3], k: usize) -> Vec<DVec3> {
+    let k = k.min(points.len().saturating_sub(1)).max(3);
+    let mut dist: Vec<(f64, usize)> = Vec::with_capacity(points.len());
+    points
+        .iter()
+        .map(|p| {
+            dist.clear();
+            dist.extend(
+                points
+                    .iter()
+                    .enumerate()
+                    .map(|(j, q)| ((*q - *p).length_squared(), j)),
+            );
+            let k = k.min(dist.len() - 1);
+            dist.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0));
+            let neighbours = &dist[..=k];
+            let mean =
+                neighbours.iter().map(|&(_, j)| points[j]).sum::<DVec3>() / neighbours.len() as f64;
+            let mut cov = Matrix3::<f64>::zeros();
+            for &(_, j) in neighbours {
+                let d = points[j] - mean;
+                let v = Vector3::new(d.x, d.y, d.z);
+                cov += v * v.transpose();
+            }
+            let eig = cov.symmetric_eigen();
+            let i = eig.eigenvalues.imin();
+            let n = eig.eigenvectors.column(i);
+            DVec3::new(n[0], n[1], n[2]).normalize_or(DVec3::Z)
+        })
+        .collect()
+}
+
+/// The axis that the normal lines meet best: (unit direction, a point on it), or None
+/// when the normals do not determine one (a plane, a sphere-like patch).
+pub fn axis_from_normal_lines(points: &[DVec3], normals: &[DVec3]) -> Option<(DVec3, DVec3)> {
+    let mut weights = vec![1.0; points.len()];
+    let mut axis = None;
+    for _ in 0..4 {
+        let mut m = Matrix6::<f64>::zeros();
+        for ((p, n), w) in points.iter().zip(normals).zip(&weights) {
+            let pn = p.cross(*n);
+            let v = Vector6::new(pn.x, pn.y, pn.z, n.x, n.y, n.z);
+            m += *w * v * v.transpose();
+        }
+        // minimise d'Ad + 2d'Bm + m'Cm with |d| = 1: m = -C⁻¹B'd, then the Schur complement
+        let a = m.fixed_view::<3, 3>(0, 0).into_owned();
+        let b = m.fixed_view::<3, 3>(0, 3).into_owned();
+        let c = m.fixed_view::<3, 3>(3, 3).into_owned();
+        let c_inv = c.try_inverse()?;
+        let schur = a - b * c_inv * b.transpose();
+        let eig = schur.symmetric_eigen();
+        let i = eig.eigenvalues.imin();
+        let d = eig.eigenvectors.column(i).into_owned();
+        let moment = -c_inv * b.transpose() * d;
+        let dir = DVec3::new(d[0], d[1], d[2]).normalize();
+        let moment = DVec3::new(moment[0], moment[1], moment[2]);
+        let on_axis = dir.cross(moment); // closest point of the axis to the origin
+        if !dir.is_finite() || !on_axis.is_finite() {
+            return None;
+        }
+        // reweight by how far each normal line passes from the axis (Cauchy-like)
+        let gaps: Vec<f64> = points
+            .iter()
+            .zip(normals)
+            .map(|(p, n)| line_gap(*p, *n, on_axis, dir))
+            .collect();
+        let mut sorted = gaps.clone();
+        sorted.sort_by(f64::total_cmp);
+        let scale = sorted[sorted.len() / 2].max(1e-9) * 2.0;
+        for (w, g) in weights.iter_mut().zip(&gaps) {
+            *w = 1.0 / (1.0 + (g / scale).powi(2));
+        }
+        axis = Some((dir, on_axis));
+    }
+    axis
+}
+
+/// Distance between the line (p, n) and the line (c, d).
+fn line_gap(p: DVec3, n: DVec3, c: DVec3, d: DVec3) -> f64 {
+    let cross = n.cross(d);
+    let len = cross.length();
+    if len < 1e-9 {
+        // parallel: distance of p from the axis line
+        let v = p - c;
+        return (v - d * v.dot(d)).length();
+    }
+    ((p - c).dot(cross) / len).abs()
+}
+
+/// A rotation whose z axis is `axis` (the hole axis) and whose x axis is as close to
+/// `hint` as possible.
+pub fn frame_with_z(axis: DVec3, hint: DVec3) -> DQuat {
+    let z = axis.normalize();
+    let x = (hint - z * hint.dot(z))
+        .try_normalize()
+        .unwrap_or_else(|| z.any_orthonormal_vector());
+    let y = z.cross(x);
+    DQuat::from_mat3(&DMat3::from_cols(x, y, z))
+}
+
+fn percentile(values: &mut [f64], f: f64) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[((values.len() - 1) as f64 * f).round() as usize]
+}
+
+/// A start for a known axis line: centre on the line at the middle of the points' span
+/// along it, radii from the distances to it (outer a(1 + a4), inner a(a4 - 1)), a3 from
+/// the span. `a4_override` replaces the estimated hole ratio.
+pub fn start_on_axis_line(
+    points: &[DVec3],
+    axis: DVec3,
+    on_axis: DVec3,
+    hint: DVec3,
+    a4_override: Option<f64>,
+) -> Candidate {
+    let rotation = frame_with_z(axis, hint);
+    let axis = rotation * DVec3::Z;
+    let mut along: Vec<f64> = points.iter().map(|p| (*p - on_axis).dot(axis)).collect();
+    let mut radial: Vec<f64> = points
+        .iter()
+        .map(|p| {
+            let v = *p - on_axis;
+            (v - axis * v.dot(axis)).length()
+        })
+        .collect();
+    let lo = percentile(&mut along, 0.02);
+    let hi = percentile(&mut along, 0.98);
+    let outer = percentile(&mut radial, 0.98).max(1e-3);
+    let inner = percentile(&mut radial, 0.02).min(0.95 * outer);
+    let centre = on_axis + axis * 0.5 * (lo + hi);
+    let half_height = (0.5 * (hi - lo)).max(0.02 * outer);
+    let (a, a4) = match a4_override {
+        Some(a4) => (outer / (1.0 + a4), a4),
+        None => {
+            // outer = a(1 + a4), inner = a(a4 - 1)
+            let a4 = ((outer + inner) / (outer - inner)).clamp(1.05, 6.0);
+            (outer / (1.0 + a4), a4)
+        }
+    };
+    Candidate {
+        shape: Shape::new(a, a, half_height, a4, 1.0, 1.0),
+        pose: Pose::new(rotation, centre),
+    }
+}
+
+/// The point of the axis with direction `d` that the normal lines meet best (for a
+/// caller's known axis direction).
+pub fn axis_point_for_direction(points: &[DVec3], normals: &[DVec3], d: DVec3) -> Option<DVec3> {
+    let mut b = Matrix3::<f64>::zeros();
+    let mut c = Matrix3::<f64>::zeros();
+    let dv = Vector3::new(d.x, d.y, d.z);
+    for (p, n) in points.iter().zip(normals) {
+        let pn = p.cross(*n);
+        let pn = Vector3::new(pn.x, pn.y, pn.z);
+        let nv = Vector3::new(n.x, n.y, n.z);
+        b += pn * nv.transpose();
+        c += nv * nv.transpose();
+    }
+    let m = -c.try_inverse()? * b.transpose() * dv;
+    let on_axis = d.cross(DVec3::new(m[0], m[1], m[2]));
+    on_axis.is_finite().then_some(on_axis)
+}
