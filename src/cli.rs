@@ -42,6 +42,12 @@ pub enum Command {
     ///
     /// Example: supertoroid fit mug.pcd > fit.json && supertoroid mesh --fit fit.json -o mug.ply
     Mesh(MeshArgs),
+    /// Run the HTTP fitting service (POST /v1/fit, /v1/fit/depth, /v1/fit/batch; GET
+    /// /healthz, /readyz, /metrics, /openapi.json). Every flag also reads its
+    /// SUPERTOROID_* environment variable.
+    ///
+    /// Example: supertoroid serve --bind 0.0.0.0:8080
+    Serve(crate::service::ServiceConfig),
 }
 
 /// The cloud a command reads.
@@ -212,6 +218,7 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
         Command::Distance(args) => distance(args),
         Command::Fit(args) => fit(args),
         Command::Mesh(args) => mesh(args),
+        Command::Serve(config) => serve(config),
     }
 }
 
@@ -379,4 +386,16 @@ fn mesh(args: MeshArgs) -> Result<(), Failure> {
     }
     let mesh = crate::io::mesh::tessellate(&shape, &pose, args.rings, args.segments);
     write_file(&args.output, |out| crate::io::write_ply_mesh(out, &mesh))
+}
+
+fn serve(config: crate::service::ServiceConfig) -> Result<(), Failure> {
+    config.validate().map_err(Failure::input)?;
+    crate::service::init_logging(config.log_format);
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(internal)?;
+    runtime
+        .block_on(crate::service::serve(config))
+        .map_err(|e| Failure::input(format!("serve: {e}")))
 }

@@ -10,6 +10,8 @@
 //! * [`eval`]: evaluators (residuals, Jacobians, normal equations for batches of
 //!   candidates): WGSL compute shaders through wgpu, and the f64 CPU reference.
 //! * [`io`]: cloud readers and writers.
+//! * [`fit`], [`solve`]: the two-stage fit and its interior-point solver.
+//! * [`service`]: the HTTP service (axum).
 //! * [`cli`]: the `supertoroid` command line.
 
 pub mod cli;
@@ -17,5 +19,6 @@ pub mod eval;
 pub mod fit;
 pub mod io;
 pub mod model;
+pub mod service;
 pub mod solve;
 pub mod synth;

@@ -234,6 +234,7 @@ impl Normalization {
     clap::ValueEnum,
     serde::Serialize,
     serde::Deserialize,
+    utoipa::ToSchema,
 )]
 #[serde(rename_all = "lowercase")]
 pub enum Backend {

@@ -80,7 +80,7 @@ impl From<EvalError> for FitError {
     }
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct PoseOut {
     pub translation: [f64; 3],
     /// row-major R, world = R·canonical + t
@@ -88,7 +88,7 @@ pub struct PoseOut {
     pub quaternion_wxyz: [f64; 4],
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct Quality {
     pub rms_distance: f64,
     pub median_distance: f64,
@@ -98,26 +98,26 @@ pub struct Quality {
     pub inlier_fraction: f64,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct Timing {
     pub stage1: f64,
     pub stage2: f64,
     pub total: f64,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct Iterations {
     pub stage1: usize,
     pub stage2: usize,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct BackendOut {
     pub kind: String,
     pub adapter: String,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct PointsOut {
     pub input: usize,
     pub stage1: usize,
@@ -125,7 +125,7 @@ pub struct PointsOut {
 }
 
 /// The result of `supertoroid fit` (and of the service), documented in the README.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct FitReport {
     pub shape: Shape,
     pub pose: PoseOut,

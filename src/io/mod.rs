@@ -30,7 +30,9 @@ use std::io::Read;
 use std::path::Path;
 
 /// The cloud formats the readers know.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum, utoipa::ToSchema,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Format {
     /// text: x y z per line, whitespace or comma separated

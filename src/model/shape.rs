@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 /// radius of the mean superellipse in units of a1/a2 (a4 = 0: superellipsoid, 0 < a4 < 1:
 /// apple shape, a4 > 1: a real hole); eps1 shapes the cross-section (meridian) curve and
 /// eps2 the top-view (x-y) curve.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct Shape {
     pub a1: f64,
     pub a2: f64,

@@ -1,0 +1,706 @@
+//! Routes, request and response types, and content negotiation.
+//!
+//! Bodies are read with the configured limit (413 beyond) and parsed here rather than by
+//! axum's extractors, so that every failure gets the JSON error body of [`ApiError`].
+
+use super::AppState;
+use super::error::{ApiError, ErrorBody, ErrorCode, ErrorDetail};
+use super::fitter::{FitJob, Readiness};
+use super::metrics::{CodeLabel, RouteLabel, RouteStatus};
+use crate::eval::Backend;
+use crate::fit::{FitOptions, FitReport};
+use crate::io::depth::{self, DepthOptions, PinholeIntrinsics, Roi};
+use crate::io::{Format, ReadLimits};
+use axum::body::{Body, Bytes};
+use axum::extract::{FromRequest, MatchedPath, Multipart, Query, Request, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Extension, Json, Router};
+use base64::Engine;
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+use utoipa::{IntoParams, OpenApi, ToSchema};
+
+type Shared = State<Arc<AppState>>;
+
+/// Fit options a request may give (all optional).
+#[derive(Clone, Debug, Default, Deserialize, Serialize, ToSchema, IntoParams)]
+#[serde(deny_unknown_fields)]
+pub struct FitRequestOptions {
+    /// seed of the random downsampling (default 0); the same seed gives the same fit
+    pub seed: Option<u64>,
+    /// auto (default: the service's evaluator), gpu, or cpu
+    pub backend: Option<Backend>,
+    /// points in stage 1 (default 150, the paper's)
+    pub stage1_points: Option<usize>,
+    /// points in stage 2 (default 1000, the paper's)
+    pub stage2_points: Option<usize>,
+    /// prior: the hole axis [x, y, z] in the cloud's frame, e.g. [0, 0, 1] for "on a
+    /// table, hole up" in a z-up frame
+    #[param(value_type = Option<Vec<f64>>)]
+    pub axis: Option<[f64; 3]>,
+    /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
+    pub format: Option<Format>,
+}
+
+impl FitRequestOptions {
+    fn job(&self, points: Vec<DVec3>, max_points: usize) -> Result<FitJob, ApiError> {
+        let limit = |v: Option<usize>, default: usize, name: &str| -> Result<usize, ApiError> {
+            let v = v.unwrap_or(default);
+            if v > max_points {
+                return Err(ApiError::unprocessable(
+                    "invalid_option",
+                    format!("{name} must be at most {max_points}"),
+                ));
+            }
+            Ok(v)
+        };
+        let defaults = FitOptions::default();
+        let known_axis = match self.axis {
+            Some(a) => {
+                let a = DVec3::from_array(a);
+                if !a.is_finite() || a.length() == 0.0 {
+                    return Err(ApiError::unprocessable(
+                        "invalid_option",
+                        "axis must be a finite non-zero vector",
+                    ));
+                }
+                Some(a)
+            }
+            None => None,
+        };
+        Ok(FitJob {
+            points,
+            options: FitOptions {
+                seed: self.seed.unwrap_or(0),
+                stage1_points: limit(self.stage1_points, defaults.stage1_points, "stage1_points")?,
+                stage2_points: limit(self.stage2_points, defaults.stage2_points, "stage2_points")?,
+                known_axis,
+                ..defaults
+            },
+            backend: self.backend.unwrap_or(Backend::Auto),
+        })
+    }
+}
+
+/// A cloud as JSON.
+#[derive(Clone, Debug, Deserialize, Serialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FitRequest {
+    /// [[x, y, z], ...] in any unit; the fit comes back in the same unit and frame
+    #[schema(value_type = Vec<Vec<f64>>)]
+    pub points: Vec<[f64; 3]>,
+    #[serde(default)]
+    pub options: FitRequestOptions,
+}
+
+/// `supertoroid fit`'s JSON plus the request id.
+#[derive(Serialize, ToSchema)]
+pub struct FitResponse {
+    pub request_id: String,
+    #[serde(flatten)]
+    pub fit: FitReport,
+}
+
+/// Many clouds in one request.
+#[derive(Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct BatchRequest {
+    pub clouds: Vec<FitRequest>,
+}
+
+/// One result per cloud, in order: `fit` or `error`.
+#[derive(Serialize, ToSchema)]
+pub struct BatchItem {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit: Option<FitReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<ErrorDetail>,
+}
+
+#[derive(Serialize, ToSchema)]
+pub struct BatchResponse {
+    pub request_id: String,
+    pub results: Vec<BatchItem>,
+}
+
+/// A depth frame as JSON (or the `params` part of a multipart request, without the
+/// base64 images).
+#[derive(Clone, Debug, Default, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DepthFitRequest {
+    /// base64 of a 16-bit grayscale PNG
+    pub depth_png: Option<String>,
+    /// base64 of raw little-endian u16 depth, `width` x `height`
+    pub depth_raw: Option<String>,
+    /// image size: required for raw depth, checked against a PNG when given
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    pub intrinsics: Option<PinholeIntrinsics>,
+    /// metres per depth unit (default 0.001, RealSense D400)
+    pub depth_scale: Option<f64>,
+    pub roi: Option<Roi>,
+    /// base64 of a mask PNG (8- or 16-bit grayscale, non-zero keeps the pixel)
+    pub mask_png: Option<String>,
+    /// keep depths in [min, max] (scaled units)
+    #[schema(value_type = Option<Vec<f64>>)]
+    pub depth_range: Option<[f64; 2]>,
+    #[serde(default)]
+    pub options: FitRequestOptions,
+}
+
+#[derive(Serialize, ToSchema)]
+pub struct Health {
+    pub status: &'static str,
+}
+
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "supertoroid",
+        description = "Fits supertoroids (one-hole superquadrics) to point clouds and depth frames. \
+            Shapes and poses as in the README: world = R·canonical + t, canonical z the hole axis."
+    ),
+    paths(
+        fit_cloud, fit_depth, fit_batch, healthz, readyz, metrics, openapi, index
+    ),
+    components(schemas(
+        FitRequest,
+        FitRequestOptions,
+        FitResponse,
+        BatchRequest,
+        BatchResponse,
+        BatchItem,
+        DepthFitRequest,
+        ErrorBody,
+        ErrorDetail,
+        Readiness,
+        Health
+    ))
+)]
+pub struct ApiDoc;
+
+pub fn router(state: Arc<AppState>) -> Router {
+    Router::new()
+        .route("/", get(index))
+        .route("/healthz", get(healthz))
+        .route("/readyz", get(readyz))
+        .route("/metrics", get(metrics))
+        .route("/openapi.json", get(openapi))
+        .route("/v1/fit", post(fit_cloud))
+        .route("/v1/fit/depth", post(fit_depth))
+        .route("/v1/fit/batch", post(fit_batch))
+        .fallback(not_found)
+        .layer(axum::extract::DefaultBodyLimit::max(
+            state.config.body_limit,
+        ))
+        .layer(middleware::from_fn_with_state(state.clone(), observe))
+        .layer(tower_http::catch_panic::CatchPanicLayer::custom(
+            panic_response,
+        ))
+        .with_state(state)
+}
+
+fn panic_response(_: Box<dyn std::any::Any + Send + 'static>) -> Response {
+    ApiError::new(
+        StatusCode::INTERNAL_SERVER_ERROR,
+        "internal",
+        "internal error (a bug: please report it with the request)",
+    )
+    .into_response()
+}
+
+async fn not_found() -> ApiError {
+    ApiError::new(
+        StatusCode::NOT_FOUND,
+        "not_found",
+        "no such route (see /openapi.json)",
+    )
+}
+
+/// The request id: the caller's `x-request-id` when it sends one, else generated.
+#[derive(Clone, Debug)]
+pub struct RequestId(pub String);
+
+static NEXT_ID: AtomicU64 = AtomicU64::new(1);
+
+/// Request ids, one log line per request, and the HTTP metrics.
+async fn observe(State(state): Shared, mut request: Request, next: Next) -> Response {
+    let start = Instant::now();
+    let id = request
+        .headers()
+        .get("x-request-id")
+        .and_then(|v| v.to_str().ok())
+        .filter(|v| !v.is_empty() && v.len() <= 128)
+        .map(str::to_owned)
+        .unwrap_or_else(|| {
+            format!(
+                "{:08x}-{}",
+                std::process::id(),
+                NEXT_ID.fetch_add(1, Ordering::Relaxed)
+            )
+        });
+    request.extensions_mut().insert(RequestId(id.clone()));
+    let route = request
+        .extensions()
+        .get::<MatchedPath>()
+        .map(|p| p.as_str().to_owned())
+        .unwrap_or_else(|| "unmatched".into());
+    let method = request.method().clone();
+    let mut response = next.run(request).await;
+    let status = response.status();
+    let elapsed = start.elapsed();
+    let m = &state.metrics;
+    m.requests
+        .get_or_create(&RouteStatus {
+            route: route.clone(),
+            status: status.as_u16(),
+        })
+        .inc();
+    m.latency
+        .get_or_create(&RouteLabel {
+            route: route.clone(),
+        })
+        .observe(elapsed.as_secs_f64());
+    if let Some(ErrorCode(code)) = response.extensions().get::<ErrorCode>() {
+        m.errors
+            .get_or_create(&CodeLabel {
+                code: (*code).into(),
+            })
+            .inc();
+    }
+    m.queue_depth.set(state.fitter.queued() as i64);
+    if let Ok(v) = HeaderValue::from_str(&id) {
+        response.headers_mut().insert("x-request-id", v);
+    }
+    tracing::info!(
+        request_id = %id,
+        %method,
+        route,
+        status = status.as_u16(),
+        ms = elapsed.as_secs_f64() * 1e3,
+        "request"
+    );
+    response
+}
+
+async fn read_body(state: &AppState, body: Body) -> Result<Bytes, ApiError> {
+    axum::body::to_bytes(body, state.config.body_limit)
+        .await
+        .map_err(|e| {
+            ApiError::new(
+                StatusCode::PAYLOAD_TOO_LARGE,
+                "body_too_large",
+                format!(
+                    "the body exceeds the limit of {} bytes ({e})",
+                    state.config.body_limit
+                ),
+            )
+        })
+}
+
+fn content_type(headers: &HeaderMap) -> String {
+    headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .map(|v| {
+            v.split(';')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .to_ascii_lowercase()
+        })
+        .unwrap_or_default()
+}
+
+fn limits(state: &AppState) -> ReadLimits {
+    ReadLimits {
+        max_points: state.config.max_points,
+    }
+}
+
+fn points_from_json(state: &AppState, points: &[[f64; 3]]) -> Result<Vec<DVec3>, ApiError> {
+    if points.len() > state.config.max_points {
+        return Err(ApiError::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "too_many_points",
+            format!(
+                "{} points (the limit is {})",
+                points.len(),
+                state.config.max_points
+            ),
+        ));
+    }
+    Ok(points.iter().map(|p| DVec3::from_array(*p)).collect())
+}
+
+async fn fit_one(state: &AppState, job: FitJob) -> Result<FitReport, ApiError> {
+    let report = state.fitter.run(vec![job]).await?.remove(0)?;
+    state.metrics.record_fit(&report);
+    Ok(report)
+}
+
+fn respond(id: RequestId, fit: FitReport) -> Json<FitResponse> {
+    Json(FitResponse {
+        request_id: id.0,
+        fit,
+    })
+}
+
+/// Fit one cloud.
+///
+/// The body is JSON (`FitRequest`), or a cloud file as it is (PCD ascii / binary /
+/// binary_compressed, PLY, XYZ/CSV text, raw float32 triples) with
+/// `application/octet-stream` (or `text/plain`, `text/csv`), its format sniffed or given
+/// as `?format=`; options then come in the query.
+#[utoipa::path(
+    post, path = "/v1/fit",
+    params(FitRequestOptions),
+    request_body(content(
+        (FitRequest = "application/json"),
+        (Vec<u8> = "application/octet-stream")
+    )),
+    responses(
+        (status = 200, body = FitResponse),
+        (status = 400, description = "malformed JSON or cloud", body = ErrorBody),
+        (status = 413, description = "body or point count over the limit", body = ErrorBody),
+        (status = 415, description = "unsupported content type or format", body = ErrorBody),
+        (status = 422, description = "a cloud no fit can work on, or a bad option", body = ErrorBody),
+        (status = 503, description = "queue full; see Retry-After", body = ErrorBody),
+        (status = 504, description = "request timeout", body = ErrorBody)
+    )
+)]
+async fn fit_cloud(
+    State(state): Shared,
+    Extension(id): Extension<RequestId>,
+    query: Result<Query<FitRequestOptions>, axum::extract::rejection::QueryRejection>,
+    headers: HeaderMap,
+    body: Body,
+) -> Result<Json<FitResponse>, ApiError> {
+    let kind = content_type(&headers);
+    let query = query
+        .map_err(|e| ApiError::unprocessable("invalid_option", e.body_text()))?
+        .0;
+    let bytes = read_body(&state, body).await?;
+    let job = if kind == "application/json" {
+        let request: FitRequest = serde_json::from_slice(&bytes).map_err(ApiError::from_json)?;
+        let points = points_from_json(&state, &request.points)?;
+        request.options.job(points, state.config.max_points)?
+    } else if matches!(
+        kind.as_str(),
+        "" | "application/octet-stream"
+            | "text/plain"
+            | "text/csv"
+            | "application/x-pcd"
+            | "application/ply"
+            | "application/x-ply"
+    ) {
+        let points = crate::io::parse_cloud(&bytes, query.format, limits(&state))?;
+        query.job(points, state.config.max_points)?
+    } else {
+        return Err(ApiError::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "unsupported_media_type",
+            format!(
+                "content type {kind:?}: send application/json or a cloud file as application/octet-stream"
+            ),
+        ));
+    };
+    Ok(respond(id, fit_one(&state, job).await?))
+}
+
+/// Fit the object in a depth frame.
+///
+/// JSON (`DepthFitRequest`, images in base64), or `multipart/form-data` with a `depth`
+/// file part (16-bit PNG, or raw u16 with width and height in `params`), an optional
+/// `mask` PNG part, and a `params` JSON part (the JSON request's other fields). The pose
+/// comes back in the camera's optical frame (x right, y down, z forward).
+#[utoipa::path(
+    post, path = "/v1/fit/depth",
+    request_body(content(
+        (DepthFitRequest = "application/json"),
+        (Vec<u8> = "multipart/form-data")
+    )),
+    responses(
+        (status = 200, body = FitResponse),
+        (status = 400, description = "malformed JSON, base64 or image", body = ErrorBody),
+        (status = 413, body = ErrorBody),
+        (status = 415, body = ErrorBody),
+        (status = 422, description = "bad intrinsics, sizes, or no valid depth", body = ErrorBody),
+        (status = 503, body = ErrorBody)
+    )
+)]
+async fn fit_depth(
+    State(state): Shared,
+    Extension(id): Extension<RequestId>,
+    request: Request,
+) -> Result<Json<FitResponse>, ApiError> {
+    let kind = content_type(request.headers());
+    let (params, depth_bytes, mask_bytes) = if kind == "application/json" {
+        let bytes = read_body(&state, request.into_body()).await?;
+        let mut params: DepthFitRequest =
+            serde_json::from_slice(&bytes).map_err(ApiError::from_json)?;
+        let decode = |field: &str, v: &Option<String>| -> Result<Option<Vec<u8>>, ApiError> {
+            v.as_ref()
+                .map(|s| {
+                    base64::engine::general_purpose::STANDARD
+                        .decode(s.as_bytes())
+                        .map_err(|e| {
+                            ApiError::bad_request("malformed_base64", format!("{field}: {e}"))
+                        })
+                })
+                .transpose()
+        };
+        let depth = match (
+            decode("depth_png", &params.depth_png)?,
+            decode("depth_raw", &params.depth_raw)?,
+        ) {
+            (Some(png), None) => DepthBytes::Png(png),
+            (None, Some(raw)) => DepthBytes::Raw(raw),
+            _ => {
+                return Err(ApiError::unprocessable(
+                    "invalid_request",
+                    "give exactly one of depth_png and depth_raw",
+                ));
+            }
+        };
+        let mask = decode("mask_png", &params.mask_png)?;
+        params.depth_png = None;
+        params.depth_raw = None;
+        (params, depth, mask)
+    } else if kind == "multipart/form-data" {
+        // the router's DefaultBodyLimit bounds the multipart stream
+        let mut multipart = Multipart::from_request(request, &())
+            .await
+            .map_err(|e| ApiError::bad_request("malformed_multipart", e.body_text()))?;
+        let mut params = None;
+        let mut depth = None;
+        let mut mask = None;
+        while let Some(field) = multipart.next_field().await.map_err(multipart_error)? {
+            let name = field.name().unwrap_or("").to_owned();
+            let data = field.bytes().await.map_err(multipart_error)?;
+            match name.as_str() {
+                "params" => {
+                    params = Some(
+                        serde_json::from_slice::<DepthFitRequest>(&data)
+                            .map_err(ApiError::from_json)?,
+                    )
+                }
+                "depth" => depth = Some(data.to_vec()),
+                "mask" => mask = Some(data.to_vec()),
+                other => {
+                    return Err(ApiError::unprocessable(
+                        "invalid_request",
+                        format!("unknown part {other:?} (params, depth, mask)"),
+                    ));
+                }
+            }
+        }
+        let params =
+            params.ok_or_else(|| ApiError::unprocessable("invalid_request", "no params part"))?;
+        let depth =
+            depth.ok_or_else(|| ApiError::unprocessable("invalid_request", "no depth part"))?;
+        let depth = if depth.starts_with(b"\x89PNG") {
+            DepthBytes::Png(depth)
+        } else {
+            DepthBytes::Raw(depth)
+        };
+        (params, depth, mask)
+    } else {
+        return Err(ApiError::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "unsupported_media_type",
+            format!("content type {kind:?}: send application/json or multipart/form-data"),
+        ));
+    };
+    let points = depth_points(&state, &params, depth_bytes, mask_bytes)?;
+    let job = params.options.job(points, state.config.max_points)?;
+    Ok(respond(id, fit_one(&state, job).await?))
+}
+
+fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
+    let status = e.status();
+    if status == StatusCode::PAYLOAD_TOO_LARGE {
+        ApiError::new(status, "body_too_large", e.body_text())
+    } else {
+        ApiError::bad_request("malformed_multipart", e.body_text())
+    }
+}
+
+enum DepthBytes {
+    Png(Vec<u8>),
+    Raw(Vec<u8>),
+}
+
+fn depth_points(
+    state: &AppState,
+    params: &DepthFitRequest,
+    depth: DepthBytes,
+    mask: Option<Vec<u8>>,
+) -> Result<Vec<DVec3>, ApiError> {
+    let intrinsics = params.intrinsics.ok_or_else(|| {
+        ApiError::unprocessable(
+            "invalid_depth_options",
+            "intrinsics {fx, fy, cx, cy} are required",
+        )
+    })?;
+    let scale = params
+        .depth_scale
+        .unwrap_or_else(depth::default_depth_scale);
+    let size = params.width.zip(params.height);
+    let image = match depth {
+        DepthBytes::Png(png) => depth::decode_depth_png(&png, scale, size, limits(state))?,
+        DepthBytes::Raw(raw) => {
+            let (w, h) = size.ok_or_else(|| {
+                ApiError::unprocessable("invalid_depth_options", "raw depth needs width and height")
+            })?;
+            depth::decode_depth_raw(&raw, w, h, scale, limits(state))?
+        }
+    };
+    let mask = mask
+        .map(|m| depth::decode_mask_png(&m, image.width, image.height, limits(state)))
+        .transpose()?;
+    let options = DepthOptions {
+        intrinsics,
+        depth_scale: scale,
+        roi: params.roi,
+        depth_range: params.depth_range,
+    };
+    Ok(depth::back_project(&image, &options, mask.as_deref())?)
+}
+
+/// Fit many clouds in one request; each gets its own result or error.
+#[utoipa::path(
+    post, path = "/v1/fit/batch",
+    request_body(content((BatchRequest = "application/json"))),
+    responses(
+        (status = 200, body = BatchResponse),
+        (status = 400, body = ErrorBody),
+        (status = 413, body = ErrorBody),
+        (status = 422, body = ErrorBody),
+        (status = 503, body = ErrorBody)
+    )
+)]
+async fn fit_batch(
+    State(state): Shared,
+    Extension(id): Extension<RequestId>,
+    headers: HeaderMap,
+    body: Body,
+) -> Result<Json<BatchResponse>, ApiError> {
+    let kind = content_type(&headers);
+    if kind != "application/json" {
+        return Err(ApiError::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "unsupported_media_type",
+            "send application/json",
+        ));
+    }
+    let bytes = read_body(&state, body).await?;
+    let request: BatchRequest = serde_json::from_slice(&bytes).map_err(ApiError::from_json)?;
+    if request.clouds.is_empty() {
+        return Err(ApiError::unprocessable(
+            "invalid_request",
+            "clouds is empty",
+        ));
+    }
+    let total: usize = request.clouds.iter().map(|c| c.points.len()).sum();
+    if total > state.config.max_points {
+        return Err(ApiError::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "too_many_points",
+            format!(
+                "{total} points in all (the limit is {})",
+                state.config.max_points
+            ),
+        ));
+    }
+    let mut jobs = Vec::new();
+    for cloud in &request.clouds {
+        let points = points_from_json(&state, &cloud.points)?;
+        jobs.push(cloud.options.job(points, state.config.max_points)?);
+    }
+    let results = state.fitter.run(jobs).await?;
+    let results = results
+        .into_iter()
+        .map(|r| match r {
+            Ok(fit) => {
+                state.metrics.record_fit(&fit);
+                BatchItem {
+                    fit: Some(fit),
+                    error: None,
+                }
+            }
+            Err(e) => BatchItem {
+                fit: None,
+                error: Some(ErrorDetail {
+                    code: e.code.into(),
+                    message: e.message,
+                }),
+            },
+        })
+        .collect();
+    Ok(Json(BatchResponse {
+        request_id: id.0,
+        results,
+    }))
+}
+
+/// Alive (touches nothing).
+#[utoipa::path(get, path = "/healthz", responses((status = 200, body = Health)))]
+async fn healthz() -> Json<Health> {
+    Json(Health { status: "ok" })
+}
+
+/// Ready: which evaluator fits run on, the adapter, and any degradation.
+#[utoipa::path(get, path = "/readyz", responses((status = 200, body = Readiness)))]
+async fn readyz(State(state): Shared) -> Json<Readiness> {
+    Json(state.fitter.readiness())
+}
+
+/// Prometheus metrics (text exposition format).
+#[utoipa::path(get, path = "/metrics", responses((status = 200, content_type = "text/plain")))]
+async fn metrics(State(state): Shared) -> impl IntoResponse {
+    (
+        [(
+            header::CONTENT_TYPE,
+            "application/openmetrics-text; version=1.0.0; charset=utf-8",
+        )],
+        state.metrics.encode(),
+    )
+}
+
+/// This document.
+#[utoipa::path(get, path = "/openapi.json", responses((status = 200, content_type = "application/json")))]
+async fn openapi() -> impl IntoResponse {
+    Json(ApiDoc::openapi())
+}
+
+/// A short page that says what the service is.
+#[utoipa::path(get, path = "/", responses((status = 200, content_type = "text/html")))]
+async fn index(State(state): Shared) -> Html<String> {
+    Html(format!(
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>supertoroid</title></head><body>\
+<h1>supertoroid {}</h1>\
+<p>Fits supertoroids (objects with one hole: mugs, rolls, gears, bearings, pots) and superellipsoids \
+to point clouds and depth frames, for robot grasping.</p>\
+<ul><li><code>POST /v1/fit</code>: a cloud (JSON, PCD, PLY, XYZ, float32)</li>\
+<li><code>POST /v1/fit/depth</code>: a 16-bit depth frame with intrinsics</li>\
+<li><code>POST /v1/fit/batch</code>: many clouds</li>\
+<li><a href=\"/openapi.json\">OpenAPI document</a>, <a href=\"/readyz\">readiness</a>, \
+<a href=\"/metrics\">metrics</a></li></ul>\
+<p>Evaluator: {}</p></body></html>",
+        env!("CARGO_PKG_VERSION"),
+        html_escape(&state.fitter.describe())
+    ))
+}
+
+fn html_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}

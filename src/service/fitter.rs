@@ -1,0 +1,195 @@
+//! Admission and execution of fits.
+//!
+//! A request first takes an admission permit (workers + queue depth of them): when none
+//! is left the queue is full and the answer is 503 at once, so memory stays bounded
+//! whatever the load. It then waits for one of `workers` worker permits and runs on
+//! tokio's blocking pool. Both permits travel into the blocking task, so a fit that
+//! outlives its request's timeout still counts until it really ends.
+//!
+//! One GPU context serves every request (pipelines compiled once); each fit gets its own
+//! evaluator on it. When the GPU fails at start or during a fit, the CPU evaluator takes
+//! over, the fit is redone on it, and `/readyz` reports the degradation.
+
+use super::config::ServiceConfig;
+use super::error::ApiError;
+use crate::eval::{AdapterChoice, Backend, CpuEvaluator, Evaluator, GpuContext, GpuEvaluator};
+use crate::fit::{FitError, FitOptions, FitReport, fit};
+use axum::http::StatusCode;
+use glam::DVec3;
+use serde::Serialize;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use tokio::sync::Semaphore;
+
+pub struct Fitter {
+    gpu: Option<Arc<GpuContext>>,
+    /// why the GPU is not in use, when it is not
+    degraded: Arc<Mutex<Option<String>>>,
+    admission: Arc<Semaphore>,
+    workers: Arc<Semaphore>,
+    waiting: Arc<AtomicUsize>,
+    worker_count: usize,
+    queue_depth: usize,
+    timeout: Duration,
+}
+
+/// What `/readyz` reports.
+#[derive(Serialize, utoipa::ToSchema)]
+pub struct Readiness {
+    pub ready: bool,
+    /// the evaluator fits run on now: gpu or cpu
+    pub backend: String,
+    pub adapter: Option<String>,
+    /// why the GPU is not used, when it was wanted
+    pub degraded: Option<String>,
+    pub workers: usize,
+    pub queue_capacity: usize,
+    pub queued: usize,
+}
+
+/// One cloud to fit, with the evaluator asked for.
+pub struct FitJob {
+    pub points: Vec<DVec3>,
+    pub options: FitOptions,
+    pub backend: Backend,
+}
+
+impl Fitter {
+    pub fn new(config: &ServiceConfig) -> Self {
+        let (gpu, degraded) = match config.backend {
+            Backend::Cpu => (None, None),
+            Backend::Auto | Backend::Gpu => match GpuContext::shared(&AdapterChoice::from_env()) {
+                Ok(ctx) => (Some(ctx), None),
+                Err(e) => {
+                    tracing::warn!(error = %e, "no GPU adapter; fitting on the CPU");
+                    (None, Some(format!("no GPU adapter: {e}")))
+                }
+            },
+        };
+        let workers = config.workers();
+        Self {
+            gpu,
+            degraded: Arc::new(Mutex::new(degraded)),
+            admission: Arc::new(Semaphore::new(workers + config.queue_depth)),
+            workers: Arc::new(Semaphore::new(workers)),
+            waiting: Arc::new(AtomicUsize::new(0)),
+            worker_count: workers,
+            queue_depth: config.queue_depth,
+            timeout: Duration::from_secs_f64(config.request_timeout),
+        }
+    }
+
+    fn gpu_usable(&self) -> Option<Arc<GpuContext>> {
+        let degraded = self.degraded.lock().map(|d| d.is_some()).unwrap_or(true);
+        if degraded { None } else { self.gpu.clone() }
+    }
+
+    pub fn describe(&self) -> String {
+        match self.gpu_usable() {
+            Some(ctx) => format!("gpu: {}", ctx.adapter_name()),
+            None => "cpu".into(),
+        }
+    }
+
+    pub fn readiness(&self) -> Readiness {
+        let gpu = self.gpu_usable();
+        Readiness {
+            ready: true,
+            backend: if gpu.is_some() { "gpu" } else { "cpu" }.into(),
+            adapter: gpu.map(|c| c.adapter_name()),
+            degraded: self.degraded.lock().ok().and_then(|d| d.clone()),
+            workers: self.worker_count,
+            queue_capacity: self.queue_depth,
+            queued: self.queued(),
+        }
+    }
+
+    pub fn queued(&self) -> usize {
+        self.waiting.load(Ordering::Relaxed)
+    }
+
+    /// Runs the jobs (one request's clouds) on one worker, in order; each result is the
+    /// fit or the reason it failed. Err is for the request as a whole: queue full,
+    /// timeout, or the GPU asked for and not available.
+    pub async fn run(
+        &self,
+        jobs: Vec<FitJob>,
+    ) -> Result<Vec<Result<FitReport, ApiError>>, ApiError> {
+        let admission = self
+            .admission
+            .clone()
+            .try_acquire_owned()
+            .map_err(|_| ApiError::overloaded())?;
+        let gpu = self.gpu_usable();
+        if gpu.is_none() && jobs.iter().any(|j| j.backend == Backend::Gpu) {
+            return Err(ApiError::unprocessable(
+                "gpu_unavailable",
+                format!(
+                    "backend gpu was asked for, but the service runs on the CPU ({})",
+                    self.degraded
+                        .lock()
+                        .ok()
+                        .and_then(|d| d.clone())
+                        .unwrap_or_else(|| "started with backend cpu".into())
+                ),
+            ));
+        }
+        let work = async {
+            self.waiting.fetch_add(1, Ordering::Relaxed);
+            let worker = self.workers.clone().acquire_owned().await;
+            self.waiting.fetch_sub(1, Ordering::Relaxed);
+            let worker = worker.map_err(|_| ApiError::overloaded())?;
+            let degraded = self.degraded.clone();
+            tokio::task::spawn_blocking(move || {
+                let _permits = (admission, worker);
+                jobs.into_iter()
+                    .map(|job| run_one(job, gpu.as_ref(), &degraded))
+                    .collect::<Vec<_>>()
+            })
+            .await
+            .map_err(|e| {
+                ApiError::new(
+                    StatusCode::INTERNAL_SERVER_ERROR,
+                    "internal",
+                    format!("the fit task failed: {e}"),
+                )
+            })
+        };
+        match tokio::time::timeout(self.timeout, work).await {
+            Ok(result) => result,
+            Err(_) => Err(ApiError::new(
+                StatusCode::GATEWAY_TIMEOUT,
+                "timeout",
+                format!("the fit did not finish within {:?}", self.timeout),
+            )),
+        }
+    }
+}
+
+/// One fit on the requested evaluator; a GPU failure marks the service degraded and the
+/// fit is redone on the CPU.
+fn run_one(
+    job: FitJob,
+    gpu: Option<&Arc<GpuContext>>,
+    degraded: &Mutex<Option<String>>,
+) -> Result<FitReport, ApiError> {
+    let use_gpu = job.backend != Backend::Cpu && gpu.is_some();
+    if use_gpu {
+        let mut evaluator = GpuEvaluator::new(gpu.unwrap().clone());
+        match fit(
+            &mut evaluator as &mut dyn Evaluator,
+            &job.points,
+            &job.options,
+        ) {
+            Err(FitError::Evaluator(e)) => {
+                tracing::error!(error = %e, "GPU evaluator failed; switching to the CPU");
+                if let Ok(mut d) = degraded.lock() {
+                    *d = Some(format!("GPU evaluator failed: {e}"));
+                }
+            }
+            other => return other.map_err(ApiError::from),
+        }
+    }
+    fit(&mut CpuEvaluator::new(), &job.points, &job.options).map_err(ApiError::from)
+}
