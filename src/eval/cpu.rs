@@ -77,7 +77,11 @@ impl Evaluator for CpuEvaluator {
                         }
                         ne
                     })
-                    .reduce(NormalEquations::zero, |mut x, y| {
+                    // collected and summed in chunk order: the same sum whatever the
+                    // thread schedule, so a seed always gives the same fit
+                    .collect::<Vec<_>>()
+                    .into_iter()
+                    .fold(NormalEquations::zero(), |mut x, y| {
                         for a in 0..NUM_PARAMS {
                             for b in a..NUM_PARAMS {
                                 x.jtj[a][b] += y.jtj[a][b];
@@ -120,7 +124,9 @@ impl Evaluator for CpuEvaluator {
                             (0.0, 0)
                         }
                     })
-                    .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+                    .collect::<Vec<_>>()
+                    .into_iter()
+                    .fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
                 Cost { cost, count }
             })
             .collect())

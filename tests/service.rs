@@ -1,0 +1,475 @@
+//! The HTTP service over real HTTP on loopback (reqwest): every endpoint with real data,
+//! every class of bad input, concurrency, overload, and the OpenAPI document.
+
+use base64::Engine;
+use reqwest::blocking::{Client, multipart};
+use serde_json::{Value, json};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::Command;
+use supertoroid::eval::Backend;
+use supertoroid::model::{Pose, Shape};
+use supertoroid::service::ServiceConfig;
+use supertoroid::synth::{self, Camera, Intrinsics};
+
+/// A server on 127.0.0.1:<free port>, stopped when dropped.
+struct Server {
+    addr: SocketAddr,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Server {
+    fn start(config: ServiceConfig) -> Self {
+        let (addr_tx, addr_rx) = std::sync::mpsc::channel();
+        let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+        let thread = std::thread::spawn(move || {
+            let runtime = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(2)
+                .enable_all()
+                .build()
+                .unwrap();
+            runtime.block_on(async move {
+                let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+                addr_tx.send(listener.local_addr().unwrap()).unwrap();
+                supertoroid::service::serve_on(listener, config, async {
+                    let _ = stop_rx.await;
+                })
+                .await
+                .unwrap();
+            });
+        });
+        let addr = addr_rx.recv().unwrap();
+        Self {
+            addr,
+            stop: Some(stop_tx),
+            thread: Some(thread),
+        }
+    }
+
+    fn url(&self, path: &str) -> String {
+        format!("http://{}{path}", self.addr)
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        if let Some(s) = self.stop.take() {
+            let _ = s.send(());
+        }
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn cpu_config() -> ServiceConfig {
+    ServiceConfig {
+        backend: Backend::Cpu,
+        ..Default::default()
+    }
+}
+
+fn client() -> Client {
+    Client::builder()
+        .timeout(std::time::Duration::from_secs(120))
+        .build()
+        .unwrap()
+}
+
+fn paper(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/clouds/paper")
+        .join(name)
+}
+
+fn shape_of(v: &Value) -> [f64; 6] {
+    let s = &v["shape"];
+    ["a1", "a2", "a3", "a4", "eps1", "eps2"].map(|k| s[k].as_f64().unwrap())
+}
+
+fn assert_same_fit(a: &Value, b: &Value, what: &str) {
+    let (sa, sb) = (shape_of(a), shape_of(b));
+    for (x, y) in sa.iter().zip(&sb) {
+        assert!((x - y).abs() <= 1e-9 * x.abs().max(1e-12), "{what}: {sa:?} vs {sb:?}");
+    }
+    assert_eq!(a["pose"]["translation"], b["pose"]["translation"], "{what}");
+}
+
+fn post_pcd(c: &Client, s: &Server, bytes: Vec<u8>, query: &str) -> reqwest::blocking::Response {
+    c.post(s.url(&format!("/v1/fit{query}")))
+        .header("content-type", "application/octet-stream")
+        .body(bytes)
+        .send()
+        .unwrap()
+}
+
+#[test]
+fn a_paper_cloud_as_pcd_and_as_json_gives_the_cli_result() {
+    let server = Server::start(cpu_config());
+    let c = client();
+    let path = paper("gearclean.pcd");
+    let bytes = std::fs::read(&path).unwrap();
+    let response = post_pcd(&c, &server, bytes.clone(), "?seed=3");
+    assert_eq!(response.status(), 200);
+    assert!(response.headers().contains_key("x-request-id"));
+    let from_pcd: Value = response.json().unwrap();
+    assert!(from_pcd["request_id"].as_str().is_some_and(|s| !s.is_empty()));
+    for key in ["shape", "pose", "quality", "timing_ms", "iterations", "backend", "points"] {
+        assert!(from_pcd.get(key).is_some(), "missing {key}");
+    }
+    assert_eq!(from_pcd["points"]["input"], 2445);
+
+    let points: Vec<[f64; 3]> = supertoroid::io::read_cloud(&path, None)
+        .unwrap()
+        .iter()
+        .map(|p| p.to_array())
+        .collect();
+    let from_json: Value = c
+        .post(server.url("/v1/fit"))
+        .json(&json!({"points": points, "options": {"seed": 3}}))
+        .send()
+        .unwrap()
+        .json()
+        .unwrap();
+    assert_same_fit(&from_pcd, &from_json, "pcd vs json");
+
+    let cli = Command::new(env!("CARGO_BIN_EXE_supertoroid"))
+        .args(["fit", path.to_str().unwrap(), "--seed", "3", "--backend", "cpu"])
+        .output()
+        .unwrap();
+    assert!(cli.status.success(), "{}", String::from_utf8_lossy(&cli.stderr));
+    let from_cli: Value = serde_json::from_slice(&cli.stdout).unwrap();
+    assert_same_fit(&from_pcd, &from_cli, "service vs CLI");
+
+    // a different seed is a different downsampling
+    let other: Value = post_pcd(&c, &server, bytes, "?seed=4").json().unwrap();
+    assert_ne!(shape_of(&other), shape_of(&from_pcd));
+}
+
+/// A rendered depth frame of a known supertoroid, its camera and the cloud it makes.
+fn depth_case() -> (Vec<u8>, Value, Shape, Pose, Camera) {
+    let shape = Shape::new(0.06, 0.05, 0.025, 1.8, 0.8, 1.0);
+    let pose = Pose::new(
+        glam::DQuat::from_rotation_x(0.3),
+        glam::DVec3::new(0.02, -0.01, 0.6),
+    );
+    let camera = Camera::look_at(
+        Intrinsics::REALSENSE_640X480,
+        glam::DVec3::new(0.0, -0.25, 0.25),
+        pose.translation,
+        glam::DVec3::Z,
+    );
+    let view = synth::render_view(&shape, &pose, &camera, 0.0001).unwrap();
+    let png = supertoroid::io::depth::encode_depth_png(&view.depth);
+    let k = camera.intrinsics;
+    let params = json!({
+        "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
+        "depth_scale": 0.0001,
+        "width": 640, "height": 480,
+        "options": {"seed": 1}
+    });
+    (png, params, shape, pose, camera)
+}
+
+#[test]
+fn a_depth_frame_as_json_and_as_multipart_fits_the_object() {
+    let server = Server::start(cpu_config());
+    let c = client();
+    let (png, params, shape, pose, camera) = depth_case();
+    let mut body = params.clone();
+    body["depth_png"] = json!(base64::engine::general_purpose::STANDARD.encode(&png));
+    let response = c.post(server.url("/v1/fit/depth")).json(&body).send().unwrap();
+    assert_eq!(response.status(), 200);
+    let from_json: Value = response.json().unwrap();
+
+    let form = multipart::Form::new()
+        .part("depth", multipart::Part::bytes(png.clone()).file_name("depth.png"))
+        .text("params", params.to_string());
+    let response = c.post(server.url("/v1/fit/depth")).multipart(form).send().unwrap();
+    assert_eq!(response.status(), 200);
+    let from_multipart: Value = response.json().unwrap();
+    assert_same_fit(&from_json, &from_multipart, "json vs multipart");
+
+    // the pose is in the camera frame: bring it to the world and compare with the truth
+    let q = from_json["pose"]["quaternion_wxyz"].as_array().unwrap();
+    let q = glam::DQuat::from_xyzw(
+        q[1].as_f64().unwrap(),
+        q[2].as_f64().unwrap(),
+        q[3].as_f64().unwrap(),
+        q[0].as_f64().unwrap(),
+    );
+    let t: Vec<f64> = from_json["pose"]["translation"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let fitted_pose = Pose::new(
+        camera.pose.rotation * q,
+        camera.pose.to_world(glam::DVec3::new(t[0], t[1], t[2])),
+    );
+    let s = shape_of(&from_json);
+    let fitted_shape = Shape::new(s[0], s[1], s[2], s[3], s[4], s[5]);
+    let e = supertoroid::fit::ground_truth::compare((&shape, &pose), (&fitted_shape, &fitted_pose));
+    assert!(e.success(), "{e:?}");
+
+    // raw u16 with a mask part: only the masked half is fitted
+    let image = supertoroid::io::depth::decode_depth_png(&png, 0.0001, None, Default::default()).unwrap();
+    let raw: Vec<u8> = image.data.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let form = multipart::Form::new()
+        .part("depth", multipart::Part::bytes(raw))
+        .text("params", params.to_string());
+    let raw_fit: Value = c.post(server.url("/v1/fit/depth")).multipart(form).send().unwrap().json().unwrap();
+    assert_same_fit(&from_json, &raw_fit, "png vs raw");
+}
+
+#[test]
+fn every_bad_input_class_gets_its_status_and_a_json_error() {
+    let server = Server::start(ServiceConfig {
+        body_limit: 200_000,
+        max_points: 400_000,
+        ..cpu_config()
+    });
+    let c = client();
+    let planar: Vec<[f64; 3]> = (0..400).map(|i| [(i % 20) as f64, (i / 20) as f64, 1.0]).collect();
+    let gear = std::fs::read(paper("gearclean.pcd")).unwrap();
+    let mut corrupt = gear.clone();
+    let n = corrupt.len();
+    corrupt.truncate(n - 500);
+    let (png, params, ..) = depth_case();
+    let mut wrong_size = params.clone();
+    wrong_size["width"] = json!(320);
+    wrong_size["depth_png"] = json!(base64::engine::general_purpose::STANDARD.encode(&png));
+    let mut bad_fx = params.clone();
+    bad_fx["intrinsics"]["fx"] = json!(0.0);
+    bad_fx["depth_png"] = wrong_size["depth_png"].clone();
+    let mut zero_depth = params.clone();
+    let blank = supertoroid::synth::DepthImage { width: 640, height: 480, scale: 0.0001, data: vec![0; 640 * 480] };
+    zero_depth["depth_png"] = json!(base64::engine::general_purpose::STANDARD.encode(supertoroid::io::depth::encode_depth_png(&blank)));
+    let json_case = |v: Value| ("application/json", v.to_string().into_bytes());
+    let cases: Vec<(&str, &str, (&str, Vec<u8>), u16, &str)> = vec![
+        ("malformed JSON", "/v1/fit", ("application/json", b"{\"points\": [[1,2,3],".to_vec()), 400, "malformed_json"),
+        ("NaN in JSON", "/v1/fit", ("application/json", b"{\"points\": [[1,2,NaN]]}".to_vec()), 400, "malformed_json"),
+        ("wrong array shape", "/v1/fit", json_case(json!({"points": [[1, 2]]})), 422, "invalid_request"),
+        ("points not an array", "/v1/fit", json_case(json!({"points": "many"})), 422, "invalid_request"),
+        ("unknown option", "/v1/fit", json_case(json!({"points": [[1,2,3]], "options": {"sede": 1}})), 422, "invalid_request"),
+        ("too few points", "/v1/fit", json_case(json!({"points": [[1,2,3],[4,5,6]]})), 422, "too_few_points"),
+        ("planar cloud", "/v1/fit", json_case(json!({"points": planar})), 422, "degenerate_cloud"),
+        ("zero axis", "/v1/fit", json_case(json!({"points": [[1,2,3]], "options": {"axis": [0,0,0]}})), 422, "invalid_option"),
+        ("oversize body", "/v1/fit", ("application/octet-stream", vec![b'1'; 300_000]), 413, "body_too_large"),
+        ("unsupported media type", "/v1/fit", ("image/jpeg", vec![1, 2, 3]), 415, "unsupported_media_type"),
+        ("unknown format", "/v1/fit", ("application/octet-stream", vec![0xff, 0x00, 0x13]), 415, "unsupported_format"),
+        ("corrupt PCD", "/v1/fit", ("application/octet-stream", corrupt), 400, "malformed_cloud"),
+        ("inf in text", "/v1/fit", ("text/plain", b"1 2 3\n4 inf 6\n".to_vec()), 422, "non_finite"),
+        ("empty body", "/v1/fit", ("application/octet-stream", vec![]), 422, "empty_cloud"),
+        ("wrong PNG size", "/v1/fit/depth", json_case(wrong_size), 400, "malformed_cloud"),
+        ("bad intrinsics", "/v1/fit/depth", json_case(bad_fx), 422, "invalid_depth_options"),
+        ("zero depth", "/v1/fit/depth", json_case(zero_depth), 422, "no_valid_depth"),
+        ("bad base64", "/v1/fit/depth", json_case(json!({"depth_png": "***", "intrinsics": {"fx": 1, "fy": 1, "cx": 0, "cy": 0}})), 400, "malformed_base64"),
+        ("no depth", "/v1/fit/depth", json_case(json!({"intrinsics": {"fx": 1, "fy": 1, "cx": 0, "cy": 0}})), 422, "invalid_request"),
+        ("empty batch", "/v1/fit/batch", json_case(json!({"clouds": []})), 422, "invalid_request"),
+        ("unknown route", "/v2/fit", json_case(json!({})), 404, "not_found"),
+    ];
+    for (what, route, (kind, body), status, code) in cases {
+        let response = c
+            .post(server.url(route))
+            .header("content-type", kind)
+            .body(body)
+            .send()
+            .unwrap();
+        let got = response.status().as_u16();
+        let text = response.text().unwrap();
+        assert_eq!(got, status, "{what}: {text}");
+        let v: Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{what}: not JSON ({e}): {text}"));
+        assert_eq!(v["error"]["code"], code, "{what}: {text}");
+        assert!(v["error"]["message"].as_str().is_some_and(|m| !m.is_empty()), "{what}");
+    }
+    // the server is still serving, and counted the errors by kind
+    assert_eq!(c.get(server.url("/healthz")).send().unwrap().status(), 200);
+    let metrics = c.get(server.url("/metrics")).send().unwrap().text().unwrap();
+    assert!(metrics.contains("supertoroid_errors_total{code=\"too_few_points\"} 1"), "{metrics}");
+}
+
+#[test]
+fn batch_fits_every_cloud_and_reports_each_error() {
+    let server = Server::start(cpu_config());
+    let c = client();
+    let cloud = |seed: u64| -> Vec<[f64; 3]> {
+        supertoroid::fit::ground_truth::make_case(seed, false, 0.005, 0.0)
+            .points
+            .iter()
+            .map(|p| p.to_array())
+            .collect()
+    };
+    let body = json!({"clouds": [
+        {"points": cloud(1), "options": {"seed": 1}},
+        {"points": [[0, 0, 0]]},
+        {"points": cloud(2)}
+    ]});
+    let v: Value = c.post(server.url("/v1/fit/batch")).json(&body).send().unwrap().json().unwrap();
+    let results = v["results"].as_array().unwrap();
+    assert_eq!(results.len(), 3);
+    assert!(results[0]["fit"]["shape"].is_object());
+    assert_eq!(results[1]["error"]["code"], "too_few_points");
+    assert!(results[2]["fit"]["shape"].is_object());
+    // the same cloud alone gives the same fit
+    let single: Value = c
+        .post(server.url("/v1/fit"))
+        .json(&json!({"points": cloud(1), "options": {"seed": 1}}))
+        .send()
+        .unwrap()
+        .json()
+        .unwrap();
+    assert_same_fit(&results[0]["fit"], &single, "batch vs single");
+}
+
+#[test]
+fn concurrent_requests_all_succeed_and_match_the_sequential_results() {
+    // the service's default evaluator: the GPU (lavapipe in CI) when there is one
+    let server = Server::start(ServiceConfig::default());
+    let c = client();
+    let ready: Value = c.get(server.url("/readyz")).send().unwrap().json().unwrap();
+    if std::env::var("CI").is_ok_and(|v| v == "true") {
+        assert_eq!(ready["backend"], "gpu", "CI must find lavapipe: {ready}");
+    }
+    let bodies: Vec<Value> = (0..4u64)
+        .map(|i| {
+            let points: Vec<[f64; 3]> = supertoroid::fit::ground_truth::make_case(10 + i, i % 2 == 1, 0.01, 0.0)
+                .points
+                .iter()
+                .map(|p| p.to_array())
+                .collect();
+            json!({"points": points, "options": {"seed": i}})
+        })
+        .collect();
+    let sequential: Vec<Value> = bodies
+        .iter()
+        .map(|b| c.post(server.url("/v1/fit")).json(b).send().unwrap().json().unwrap())
+        .collect();
+    let concurrent: Vec<(usize, u16, Value)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..32)
+            .map(|i| {
+                let (c, server, bodies) = (&c, &server, &bodies);
+                scope.spawn(move || {
+                    let r = c.post(server.url("/v1/fit")).json(&bodies[i % 4]).send().unwrap();
+                    (i % 4, r.status().as_u16(), r.json::<Value>().unwrap())
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let mut ids = std::collections::HashSet::new();
+    for (k, status, v) in &concurrent {
+        assert_eq!(*status, 200, "{v}");
+        assert_same_fit(v, &sequential[*k], "concurrent vs sequential");
+        assert!(ids.insert(v["request_id"].as_str().unwrap().to_owned()), "request ids are unique");
+    }
+}
+
+#[test]
+fn a_full_queue_answers_503_with_retry_after_and_then_recovers() {
+    let server = Server::start(ServiceConfig {
+        workers: Some(1),
+        queue_depth: 0,
+        ..cpu_config()
+    });
+    let c = client();
+    let points: Vec<[f64; 3]> = supertoroid::fit::ground_truth::make_case(5, false, 0.01, 0.05)
+        .points
+        .iter()
+        .map(|p| p.to_array())
+        .collect();
+    // big stages make each fit slow enough for the others to find the worker busy
+    let body = json!({"points": points, "options": {"stage1_points": 2000, "stage2_points": 2000}});
+    let results: Vec<(u16, Option<String>, Value)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..8)
+            .map(|_| {
+                let (c, server, body) = (&c, &server, &body);
+                scope.spawn(move || {
+                    let r = c.post(server.url("/v1/fit")).json(body).send().unwrap();
+                    let retry = r
+                        .headers()
+                        .get("retry-after")
+                        .map(|v| v.to_str().unwrap().to_owned());
+                    (r.status().as_u16(), retry, r.json::<Value>().unwrap())
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let ok = results.iter().filter(|r| r.0 == 200).count();
+    let rejected: Vec<_> = results.iter().filter(|r| r.0 == 503).collect();
+    assert!(ok >= 1, "{results:?}");
+    assert!(!rejected.is_empty(), "no request was turned away: {results:?}");
+    assert_eq!(ok + rejected.len(), 8);
+    for (_, retry, v) in rejected {
+        assert_eq!(retry.as_deref(), Some("1"));
+        assert_eq!(v["error"]["code"], "overloaded");
+    }
+    let after = c.post(server.url("/v1/fit")).json(&json!({"points": points})).send().unwrap();
+    assert_eq!(after.status(), 200);
+}
+
+#[test]
+fn health_readiness_metrics_index_and_a_valid_openapi_document() {
+    let server = Server::start(cpu_config());
+    let c = client();
+    let health: Value = c.get(server.url("/healthz")).send().unwrap().json().unwrap();
+    assert_eq!(health["status"], "ok");
+    let ready: Value = c.get(server.url("/readyz")).send().unwrap().json().unwrap();
+    assert_eq!(ready["ready"], true);
+    assert_eq!(ready["backend"], "cpu");
+    let index = c.get(server.url("/")).send().unwrap().text().unwrap();
+    assert!(index.contains("supertoroid") && index.contains("/openapi.json"));
+    let metrics = c.get(server.url("/metrics")).send().unwrap().text().unwrap();
+    for name in [
+        "supertoroid_http_requests_total{route=\"/healthz\",status=\"200\"} 1",
+        "supertoroid_queue_depth",
+        "supertoroid_http_request_duration_seconds_bucket",
+    ] {
+        assert!(metrics.contains(name), "{name} missing from:\n{metrics}");
+    }
+
+    let doc: Value = c.get(server.url("/openapi.json")).send().unwrap().json().unwrap();
+    assert!(doc["openapi"].as_str().unwrap().starts_with("3."));
+    for (path, method) in [
+        ("/v1/fit", "post"),
+        ("/v1/fit/depth", "post"),
+        ("/v1/fit/batch", "post"),
+        ("/healthz", "get"),
+        ("/readyz", "get"),
+        ("/metrics", "get"),
+        ("/openapi.json", "get"),
+        ("/", "get"),
+    ] {
+        assert!(doc["paths"][path][method].is_object(), "{path} {method} missing");
+        assert!(doc["paths"][path][method]["responses"]["200"].is_object(), "{path}");
+    }
+    // every $ref resolves
+    fn refs(v: &Value, out: &mut Vec<String>) {
+        match v {
+            Value::Object(m) => {
+                for (k, x) in m {
+                    if k == "$ref" {
+                        out.push(x.as_str().unwrap().to_owned());
+                    } else {
+                        refs(x, out);
+                    }
+                }
+            }
+            Value::Array(a) => a.iter().for_each(|x| refs(x, out)),
+            _ => {}
+        }
+    }
+    let mut all = Vec::new();
+    refs(&doc, &mut all);
+    assert!(!all.is_empty());
+    for r in all {
+        let name = r.strip_prefix("#/components/schemas/").unwrap_or_else(|| panic!("{r}"));
+        assert!(doc["components"]["schemas"][name].is_object(), "{r} does not resolve");
+    }
+    // the documented response really has the documented top-level fields
+    let fit_schema = &doc["components"]["schemas"]["FitResponse"];
+    assert!(fit_schema.to_string().contains("request_id"));
+}
