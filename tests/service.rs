@@ -91,7 +91,10 @@ fn shape_of(v: &Value) -> [f64; 6] {
 fn assert_same_fit(a: &Value, b: &Value, what: &str) {
     let (sa, sb) = (shape_of(a), shape_of(b));
     for (x, y) in sa.iter().zip(&sb) {
-        assert!((x - y).abs() <= 1e-9 * x.abs().max(1e-12), "{what}: {sa:?} vs {sb:?}");
+        assert!(
+            (x - y).abs() <= 1e-9 * x.abs().max(1e-12),
+            "{what}: {sa:?} vs {sb:?}"
+        );
     }
     assert_eq!(a["pose"]["translation"], b["pose"]["translation"], "{what}");
 }
@@ -114,8 +117,20 @@ fn a_paper_cloud_as_pcd_and_as_json_gives_the_cli_result() {
     assert_eq!(response.status(), 200);
     assert!(response.headers().contains_key("x-request-id"));
     let from_pcd: Value = response.json().unwrap();
-    assert!(from_pcd["request_id"].as_str().is_some_and(|s| !s.is_empty()));
-    for key in ["shape", "pose", "quality", "timing_ms", "iterations", "backend", "points"] {
+    assert!(
+        from_pcd["request_id"]
+            .as_str()
+            .is_some_and(|s| !s.is_empty())
+    );
+    for key in [
+        "shape",
+        "pose",
+        "quality",
+        "timing_ms",
+        "iterations",
+        "backend",
+        "points",
+    ] {
         assert!(from_pcd.get(key).is_some(), "missing {key}");
     }
     assert_eq!(from_pcd["points"]["input"], 2445);
@@ -135,10 +150,21 @@ fn a_paper_cloud_as_pcd_and_as_json_gives_the_cli_result() {
     assert_same_fit(&from_pcd, &from_json, "pcd vs json");
 
     let cli = Command::new(env!("CARGO_BIN_EXE_supertoroid"))
-        .args(["fit", path.to_str().unwrap(), "--seed", "3", "--backend", "cpu"])
+        .args([
+            "fit",
+            path.to_str().unwrap(),
+            "--seed",
+            "3",
+            "--backend",
+            "cpu",
+        ])
         .output()
         .unwrap();
-    assert!(cli.status.success(), "{}", String::from_utf8_lossy(&cli.stderr));
+    assert!(
+        cli.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cli.stderr)
+    );
     let from_cli: Value = serde_json::from_slice(&cli.stdout).unwrap();
     assert_same_fit(&from_pcd, &from_cli, "service vs CLI");
 
@@ -179,14 +205,25 @@ fn a_depth_frame_as_json_and_as_multipart_fits_the_object() {
     let (png, params, shape, pose, camera) = depth_case();
     let mut body = params.clone();
     body["depth_png"] = json!(base64::engine::general_purpose::STANDARD.encode(&png));
-    let response = c.post(server.url("/v1/fit/depth")).json(&body).send().unwrap();
+    let response = c
+        .post(server.url("/v1/fit/depth"))
+        .json(&body)
+        .send()
+        .unwrap();
     assert_eq!(response.status(), 200);
     let from_json: Value = response.json().unwrap();
 
     let form = multipart::Form::new()
-        .part("depth", multipart::Part::bytes(png.clone()).file_name("depth.png"))
+        .part(
+            "depth",
+            multipart::Part::bytes(png.clone()).file_name("depth.png"),
+        )
         .text("params", params.to_string());
-    let response = c.post(server.url("/v1/fit/depth")).multipart(form).send().unwrap();
+    let response = c
+        .post(server.url("/v1/fit/depth"))
+        .multipart(form)
+        .send()
+        .unwrap();
     assert_eq!(response.status(), 200);
     let from_multipart: Value = response.json().unwrap();
     assert_same_fit(&from_json, &from_multipart, "json vs multipart");
@@ -215,12 +252,19 @@ fn a_depth_frame_as_json_and_as_multipart_fits_the_object() {
     assert!(e.success(), "{e:?}");
 
     // raw u16 with a mask part: only the masked half is fitted
-    let image = supertoroid::io::depth::decode_depth_png(&png, 0.0001, None, Default::default()).unwrap();
+    let image =
+        supertoroid::io::depth::decode_depth_png(&png, 0.0001, None, Default::default()).unwrap();
     let raw: Vec<u8> = image.data.iter().flat_map(|v| v.to_le_bytes()).collect();
     let form = multipart::Form::new()
         .part("depth", multipart::Part::bytes(raw))
         .text("params", params.to_string());
-    let raw_fit: Value = c.post(server.url("/v1/fit/depth")).multipart(form).send().unwrap().json().unwrap();
+    let raw_fit: Value = c
+        .post(server.url("/v1/fit/depth"))
+        .multipart(form)
+        .send()
+        .unwrap()
+        .json()
+        .unwrap();
     assert_same_fit(&from_json, &raw_fit, "png vs raw");
 }
 
@@ -232,7 +276,9 @@ fn every_bad_input_class_gets_its_status_and_a_json_error() {
         ..cpu_config()
     });
     let c = client();
-    let planar: Vec<[f64; 3]> = (0..400).map(|i| [(i % 20) as f64, (i / 20) as f64, 1.0]).collect();
+    let planar: Vec<[f64; 3]> = (0..400)
+        .map(|i| [(i % 20) as f64, (i / 20) as f64, 1.0])
+        .collect();
     let gear = std::fs::read(paper("gearclean.pcd")).unwrap();
     let mut corrupt = gear.clone();
     let n = corrupt.len();
@@ -245,31 +291,167 @@ fn every_bad_input_class_gets_its_status_and_a_json_error() {
     bad_fx["intrinsics"]["fx"] = json!(0.0);
     bad_fx["depth_png"] = wrong_size["depth_png"].clone();
     let mut zero_depth = params.clone();
-    let blank = supertoroid::synth::DepthImage { width: 640, height: 480, scale: 0.0001, data: vec![0; 640 * 480] };
-    zero_depth["depth_png"] = json!(base64::engine::general_purpose::STANDARD.encode(supertoroid::io::depth::encode_depth_png(&blank)));
+    let blank = supertoroid::synth::DepthImage {
+        width: 640,
+        height: 480,
+        scale: 0.0001,
+        data: vec![0; 640 * 480],
+    };
+    zero_depth["depth_png"] = json!(
+        base64::engine::general_purpose::STANDARD
+            .encode(supertoroid::io::depth::encode_depth_png(&blank))
+    );
     let json_case = |v: Value| ("application/json", v.to_string().into_bytes());
     let cases: Vec<(&str, &str, (&str, Vec<u8>), u16, &str)> = vec![
-        ("malformed JSON", "/v1/fit", ("application/json", b"{\"points\": [[1,2,3],".to_vec()), 400, "malformed_json"),
-        ("NaN in JSON", "/v1/fit", ("application/json", b"{\"points\": [[1,2,NaN]]}".to_vec()), 400, "malformed_json"),
-        ("wrong array shape", "/v1/fit", json_case(json!({"points": [[1, 2]]})), 422, "invalid_request"),
-        ("points not an array", "/v1/fit", json_case(json!({"points": "many"})), 422, "invalid_request"),
-        ("unknown option", "/v1/fit", json_case(json!({"points": [[1,2,3]], "options": {"sede": 1}})), 422, "invalid_request"),
-        ("too few points", "/v1/fit", json_case(json!({"points": [[1,2,3],[4,5,6]]})), 422, "too_few_points"),
-        ("planar cloud", "/v1/fit", json_case(json!({"points": planar})), 422, "degenerate_cloud"),
-        ("zero axis", "/v1/fit", json_case(json!({"points": [[1,2,3]], "options": {"axis": [0,0,0]}})), 422, "invalid_option"),
-        ("oversize body", "/v1/fit", ("application/octet-stream", vec![b'1'; 300_000]), 413, "body_too_large"),
-        ("unsupported media type", "/v1/fit", ("image/jpeg", vec![1, 2, 3]), 415, "unsupported_media_type"),
-        ("unknown format", "/v1/fit", ("application/octet-stream", vec![0xff, 0x00, 0x13]), 415, "unsupported_format"),
-        ("corrupt PCD", "/v1/fit", ("application/octet-stream", corrupt), 400, "malformed_cloud"),
-        ("inf in text", "/v1/fit", ("text/plain", b"1 2 3\n4 inf 6\n".to_vec()), 422, "non_finite"),
-        ("empty body", "/v1/fit", ("application/octet-stream", vec![]), 422, "empty_cloud"),
-        ("wrong PNG size", "/v1/fit/depth", json_case(wrong_size), 400, "malformed_cloud"),
-        ("bad intrinsics", "/v1/fit/depth", json_case(bad_fx), 422, "invalid_depth_options"),
-        ("zero depth", "/v1/fit/depth", json_case(zero_depth), 422, "no_valid_depth"),
-        ("bad base64", "/v1/fit/depth", json_case(json!({"depth_png": "***", "intrinsics": {"fx": 1, "fy": 1, "cx": 0, "cy": 0}})), 400, "malformed_base64"),
-        ("no depth", "/v1/fit/depth", json_case(json!({"intrinsics": {"fx": 1, "fy": 1, "cx": 0, "cy": 0}})), 422, "invalid_request"),
-        ("empty batch", "/v1/fit/batch", json_case(json!({"clouds": []})), 422, "invalid_request"),
-        ("unknown route", "/v2/fit", json_case(json!({})), 404, "not_found"),
+        (
+            "malformed JSON",
+            "/v1/fit",
+            ("application/json", b"{\"points\": [[1,2,3],".to_vec()),
+            400,
+            "malformed_json",
+        ),
+        (
+            "NaN in JSON",
+            "/v1/fit",
+            ("application/json", b"{\"points\": [[1,2,NaN]]}".to_vec()),
+            400,
+            "malformed_json",
+        ),
+        (
+            "wrong array shape",
+            "/v1/fit",
+            json_case(json!({"points": [[1, 2]]})),
+            422,
+            "invalid_request",
+        ),
+        (
+            "points not an array",
+            "/v1/fit",
+            json_case(json!({"points": "many"})),
+            422,
+            "invalid_request",
+        ),
+        (
+            "unknown option",
+            "/v1/fit",
+            json_case(json!({"points": [[1,2,3]], "options": {"sede": 1}})),
+            422,
+            "invalid_request",
+        ),
+        (
+            "too few points",
+            "/v1/fit",
+            json_case(json!({"points": [[1,2,3],[4,5,6]]})),
+            422,
+            "too_few_points",
+        ),
+        (
+            "planar cloud",
+            "/v1/fit",
+            json_case(json!({"points": planar})),
+            422,
+            "degenerate_cloud",
+        ),
+        (
+            "zero axis",
+            "/v1/fit",
+            json_case(json!({"points": [[1,2,3]], "options": {"axis": [0,0,0]}})),
+            422,
+            "invalid_option",
+        ),
+        (
+            "oversize body",
+            "/v1/fit",
+            ("application/octet-stream", vec![b'1'; 300_000]),
+            413,
+            "body_too_large",
+        ),
+        (
+            "unsupported media type",
+            "/v1/fit",
+            ("image/jpeg", vec![1, 2, 3]),
+            415,
+            "unsupported_media_type",
+        ),
+        (
+            "unknown format",
+            "/v1/fit",
+            ("application/octet-stream", vec![0xff, 0x00, 0x13]),
+            415,
+            "unsupported_format",
+        ),
+        (
+            "corrupt PCD",
+            "/v1/fit",
+            ("application/octet-stream", corrupt),
+            400,
+            "malformed_cloud",
+        ),
+        (
+            "inf in text",
+            "/v1/fit",
+            ("text/plain", b"1 2 3\n4 inf 6\n".to_vec()),
+            422,
+            "non_finite",
+        ),
+        (
+            "empty body",
+            "/v1/fit",
+            ("application/octet-stream", vec![]),
+            422,
+            "empty_cloud",
+        ),
+        (
+            "wrong PNG size",
+            "/v1/fit/depth",
+            json_case(wrong_size),
+            400,
+            "malformed_cloud",
+        ),
+        (
+            "bad intrinsics",
+            "/v1/fit/depth",
+            json_case(bad_fx),
+            422,
+            "invalid_depth_options",
+        ),
+        (
+            "zero depth",
+            "/v1/fit/depth",
+            json_case(zero_depth),
+            422,
+            "no_valid_depth",
+        ),
+        (
+            "bad base64",
+            "/v1/fit/depth",
+            json_case(
+                json!({"depth_png": "***", "intrinsics": {"fx": 1, "fy": 1, "cx": 0, "cy": 0}}),
+            ),
+            400,
+            "malformed_base64",
+        ),
+        (
+            "no depth",
+            "/v1/fit/depth",
+            json_case(json!({"intrinsics": {"fx": 1, "fy": 1, "cx": 0, "cy": 0}})),
+            422,
+            "invalid_request",
+        ),
+        (
+            "empty batch",
+            "/v1/fit/batch",
+            json_case(json!({"clouds": []})),
+            422,
+            "invalid_request",
+        ),
+        (
+            "unknown route",
+            "/v2/fit",
+            json_case(json!({})),
+            404,
+            "not_found",
+        ),
     ];
     for (what, route, (kind, body), status, code) in cases {
         let response = c
@@ -281,14 +463,28 @@ fn every_bad_input_class_gets_its_status_and_a_json_error() {
         let got = response.status().as_u16();
         let text = response.text().unwrap();
         assert_eq!(got, status, "{what}: {text}");
-        let v: Value = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{what}: not JSON ({e}): {text}"));
+        let v: Value = serde_json::from_str(&text)
+            .unwrap_or_else(|e| panic!("{what}: not JSON ({e}): {text}"));
         assert_eq!(v["error"]["code"], code, "{what}: {text}");
-        assert!(v["error"]["message"].as_str().is_some_and(|m| !m.is_empty()), "{what}");
+        assert!(
+            v["error"]["message"]
+                .as_str()
+                .is_some_and(|m| !m.is_empty()),
+            "{what}"
+        );
     }
     // the server is still serving, and counted the errors by kind
     assert_eq!(c.get(server.url("/healthz")).send().unwrap().status(), 200);
-    let metrics = c.get(server.url("/metrics")).send().unwrap().text().unwrap();
-    assert!(metrics.contains("supertoroid_errors_total{code=\"too_few_points\"} 1"), "{metrics}");
+    let metrics = c
+        .get(server.url("/metrics"))
+        .send()
+        .unwrap()
+        .text()
+        .unwrap();
+    assert!(
+        metrics.contains("supertoroid_errors_total{code=\"too_few_points\"} 1"),
+        "{metrics}"
+    );
 }
 
 #[test]
@@ -307,7 +503,13 @@ fn batch_fits_every_cloud_and_reports_each_error() {
         {"points": [[0, 0, 0]]},
         {"points": cloud(2)}
     ]});
-    let v: Value = c.post(server.url("/v1/fit/batch")).json(&body).send().unwrap().json().unwrap();
+    let v: Value = c
+        .post(server.url("/v1/fit/batch"))
+        .json(&body)
+        .send()
+        .unwrap()
+        .json()
+        .unwrap();
     let results = v["results"].as_array().unwrap();
     assert_eq!(results.len(), 3);
     assert!(results[0]["fit"]["shape"].is_object());
@@ -335,24 +537,36 @@ fn concurrent_requests_all_succeed_and_match_the_sequential_results() {
     }
     let bodies: Vec<Value> = (0..4u64)
         .map(|i| {
-            let points: Vec<[f64; 3]> = supertoroid::fit::ground_truth::make_case(10 + i, i % 2 == 1, 0.01, 0.0)
-                .points
-                .iter()
-                .map(|p| p.to_array())
-                .collect();
+            let points: Vec<[f64; 3]> =
+                supertoroid::fit::ground_truth::make_case(10 + i, i % 2 == 1, 0.01, 0.0)
+                    .points
+                    .iter()
+                    .map(|p| p.to_array())
+                    .collect();
             json!({"points": points, "options": {"seed": i}})
         })
         .collect();
     let sequential: Vec<Value> = bodies
         .iter()
-        .map(|b| c.post(server.url("/v1/fit")).json(b).send().unwrap().json().unwrap())
+        .map(|b| {
+            c.post(server.url("/v1/fit"))
+                .json(b)
+                .send()
+                .unwrap()
+                .json()
+                .unwrap()
+        })
         .collect();
     let concurrent: Vec<(usize, u16, Value)> = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..32)
             .map(|i| {
                 let (c, server, bodies) = (&c, &server, &bodies);
                 scope.spawn(move || {
-                    let r = c.post(server.url("/v1/fit")).json(&bodies[i % 4]).send().unwrap();
+                    let r = c
+                        .post(server.url("/v1/fit"))
+                        .json(&bodies[i % 4])
+                        .send()
+                        .unwrap();
                     (i % 4, r.status().as_u16(), r.json::<Value>().unwrap())
                 })
             })
@@ -363,7 +577,10 @@ fn concurrent_requests_all_succeed_and_match_the_sequential_results() {
     for (k, status, v) in &concurrent {
         assert_eq!(*status, 200, "{v}");
         assert_same_fit(v, &sequential[*k], "concurrent vs sequential");
-        assert!(ids.insert(v["request_id"].as_str().unwrap().to_owned()), "request ids are unique");
+        assert!(
+            ids.insert(v["request_id"].as_str().unwrap().to_owned()),
+            "request ids are unique"
+        );
     }
 }
 
@@ -401,13 +618,20 @@ fn a_full_queue_answers_503_with_retry_after_and_then_recovers() {
     let ok = results.iter().filter(|r| r.0 == 200).count();
     let rejected: Vec<_> = results.iter().filter(|r| r.0 == 503).collect();
     assert!(ok >= 1, "{results:?}");
-    assert!(!rejected.is_empty(), "no request was turned away: {results:?}");
+    assert!(
+        !rejected.is_empty(),
+        "no request was turned away: {results:?}"
+    );
     assert_eq!(ok + rejected.len(), 8);
     for (_, retry, v) in rejected {
         assert_eq!(retry.as_deref(), Some("1"));
         assert_eq!(v["error"]["code"], "overloaded");
     }
-    let after = c.post(server.url("/v1/fit")).json(&json!({"points": points})).send().unwrap();
+    let after = c
+        .post(server.url("/v1/fit"))
+        .json(&json!({"points": points}))
+        .send()
+        .unwrap();
     assert_eq!(after.status(), 200);
 }
 
@@ -415,14 +639,24 @@ fn a_full_queue_answers_503_with_retry_after_and_then_recovers() {
 fn health_readiness_metrics_index_and_a_valid_openapi_document() {
     let server = Server::start(cpu_config());
     let c = client();
-    let health: Value = c.get(server.url("/healthz")).send().unwrap().json().unwrap();
+    let health: Value = c
+        .get(server.url("/healthz"))
+        .send()
+        .unwrap()
+        .json()
+        .unwrap();
     assert_eq!(health["status"], "ok");
     let ready: Value = c.get(server.url("/readyz")).send().unwrap().json().unwrap();
     assert_eq!(ready["ready"], true);
     assert_eq!(ready["backend"], "cpu");
     let index = c.get(server.url("/")).send().unwrap().text().unwrap();
     assert!(index.contains("supertoroid") && index.contains("/openapi.json"));
-    let metrics = c.get(server.url("/metrics")).send().unwrap().text().unwrap();
+    let metrics = c
+        .get(server.url("/metrics"))
+        .send()
+        .unwrap()
+        .text()
+        .unwrap();
     for name in [
         "supertoroid_http_requests_total{route=\"/healthz\",status=\"200\"} 1",
         "supertoroid_queue_depth",
@@ -431,7 +665,12 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
         assert!(metrics.contains(name), "{name} missing from:\n{metrics}");
     }
 
-    let doc: Value = c.get(server.url("/openapi.json")).send().unwrap().json().unwrap();
+    let doc: Value = c
+        .get(server.url("/openapi.json"))
+        .send()
+        .unwrap()
+        .json()
+        .unwrap();
     assert!(doc["openapi"].as_str().unwrap().starts_with("3."));
     for (path, method) in [
         ("/v1/fit", "post"),
@@ -443,8 +682,14 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
         ("/openapi.json", "get"),
         ("/", "get"),
     ] {
-        assert!(doc["paths"][path][method].is_object(), "{path} {method} missing");
-        assert!(doc["paths"][path][method]["responses"]["200"].is_object(), "{path}");
+        assert!(
+            doc["paths"][path][method].is_object(),
+            "{path} {method} missing"
+        );
+        assert!(
+            doc["paths"][path][method]["responses"]["200"].is_object(),
+            "{path}"
+        );
     }
     // every $ref resolves
     fn refs(v: &Value, out: &mut Vec<String>) {
@@ -466,8 +711,13 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
     refs(&doc, &mut all);
     assert!(!all.is_empty());
     for r in all {
-        let name = r.strip_prefix("#/components/schemas/").unwrap_or_else(|| panic!("{r}"));
-        assert!(doc["components"]["schemas"][name].is_object(), "{r} does not resolve");
+        let name = r
+            .strip_prefix("#/components/schemas/")
+            .unwrap_or_else(|| panic!("{r}"));
+        assert!(
+            doc["components"]["schemas"][name].is_object(),
+            "{r} does not resolve"
+        );
     }
     // the documented response really has the documented top-level fields
     let fit_schema = &doc["components"]["schemas"]["FitResponse"];

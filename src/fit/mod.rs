@@ -283,6 +283,8 @@ pub fn fit(
         loss,
         max_iterations: 40,
         cost_tolerance: 1e-5,
+        prune_after: 4,
+        prune_ratio: 1.5,
         ..Default::default()
     };
     if o.known_axis.is_some() {

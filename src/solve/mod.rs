@@ -62,6 +62,11 @@ pub struct SolverOptions {
     pub shape_prior: [f64; 6],
     /// optional mask of parameters held fixed (true = fixed), e.g. a known hole axis
     pub fixed: [bool; NUM_PARAMS],
+    /// after this many iterations (0: never), stop every start whose cost exceeds
+    /// `prune_ratio` times the best one's: multi-start batches spend their time on the
+    /// basins that can still win
+    pub prune_after: usize,
+    pub prune_ratio: f64,
 }
 
 impl Default for SolverOptions {
@@ -74,6 +79,8 @@ impl Default for SolverOptions {
             loss: Loss::Squared,
             shape_prior: [0.0; 6],
             fixed: [false; NUM_PARAMS],
+            prune_after: 0,
+            prune_ratio: 2.0,
         }
     }
 }
@@ -87,6 +94,8 @@ pub enum Stop {
     SmallGradient,
     IterationCap,
     NoProgress,
+    /// dropped from a batch because its cost was far above the best start's
+    Pruned,
 }
 
 /// One line of the iteration log.
@@ -208,7 +217,15 @@ pub fn solve(
         })
         .collect();
 
-    for _ in 0..o.max_iterations {
+    for iteration in 0..o.max_iterations {
+        if o.prune_after > 0 && iteration == o.prune_after && states.len() > 1 {
+            let best = states.iter().map(|s| s.cost).fold(f64::INFINITY, f64::min);
+            for s in states.iter_mut() {
+                if s.stop.is_none() && s.cost > o.prune_ratio * best {
+                    s.stop = Some(Stop::Pruned);
+                }
+            }
+        }
         let active: Vec<usize> = (0..states.len())
             .filter(|&i| states[i].stop.is_none())
             .collect();
