@@ -528,8 +528,11 @@ fn batch_fits_every_cloud_and_reports_each_error() {
 
 #[test]
 fn concurrent_requests_all_succeed_and_match_the_sequential_results() {
-    // the service's default evaluator: the GPU (lavapipe in CI) when there is one
-    let server = Server::start(ServiceConfig::default());
+    // the GPU evaluator (lavapipe in CI): the service shares one context among requests
+    let server = Server::start(ServiceConfig {
+        backend: Backend::Gpu,
+        ..Default::default()
+    });
     let c = client();
     let ready: Value = c.get(server.url("/readyz")).send().unwrap().json().unwrap();
     if std::env::var("CI").is_ok_and(|v| v == "true") {

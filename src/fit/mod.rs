@@ -285,6 +285,8 @@ pub fn fit(
         cost_tolerance: 1e-5,
         prune_after: 4,
         prune_ratio: 1.5,
+        // normalised units (the cloud's RMS radius is 1): stage 2 polishes
+        step_tolerance: 1e-3,
         ..Default::default()
     };
     if o.known_axis.is_some() {
@@ -305,6 +307,10 @@ pub fn fit(
         loss,
         shape_prior: [0.0, 0.0, o.a3_penalty, -o.a4_reward, 0.0, 0.0],
         fixed: opts1.fixed,
+        // steps of 1e-4 of the cloud's RMS radius no longer move the fit; near the end
+        // Gauss-Newton on a Huber loss converges only linearly, so this saves half the
+        // iterations
+        step_tolerance: 1e-4,
         ..Default::default()
     };
     let stage2 = solve(evaluator, &[best.candidate], &bounds, &opts2)?.remove(0);

@@ -60,6 +60,11 @@ impl Fitter {
         let (gpu, degraded) = match config.backend {
             Backend::Cpu => (None, None),
             Backend::Auto | Backend::Gpu => match GpuContext::shared(&AdapterChoice::from_env()) {
+                // auto leaves a software adapter alone (see `eval::make_evaluator`)
+                Ok(ctx) if config.backend == Backend::Auto && ctx.is_software() => {
+                    tracing::info!(adapter = %ctx.adapter_name(), "only a software GPU adapter; auto fits on the CPU");
+                    (None, None)
+                }
                 Ok(ctx) => (Some(ctx), None),
                 Err(e) => {
                     tracing::warn!(error = %e, "no GPU adapter; fitting on the CPU");
