@@ -48,6 +48,57 @@ pub enum Command {
     ///
     /// Example: supertoroid serve --bind 0.0.0.0:8080
     Serve(crate::service::ServiceConfig),
+    /// Benchmarks: the paper's clouds (its Table II), the ground-truth suite, evaluator
+    /// scaling. Each writes JSON, CSV and a markdown report into --out.
+    ///
+    /// Example: supertoroid bench paper ../shared/clouds/paper --out bench-results
+    Bench(BenchArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    pub which: BenchCommand,
+    /// directory for <name>.json, <name>.csv and <name>.md
+    #[arg(long, global = true, default_value = "bench-results")]
+    pub out: PathBuf,
+    /// evaluator for the fits (paper, synthetic): auto, gpu, cpu
+    #[arg(long, global = true, value_enum)]
+    pub backend: Option<Backend>,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Fit every cloud in DIR --runs times with different downsampling seeds; Good /
+    /// Decent / Bad by the rule in the report; the paper's row beside ours.
+    Paper {
+        dir: PathBuf,
+        #[arg(long, default_value_t = 10)]
+        runs: usize,
+    },
+    /// The ground-truth suite: --cases seeded synthetic clouds over 18 categories (full /
+    /// partial x noise x outliers); success rates and error distributions.
+    Synthetic {
+        #[arg(long, default_value_t = 180)]
+        cases: usize,
+        #[arg(long, default_value_t = 10_000)]
+        seed: u64,
+    },
+    /// Time per solver iteration against points and candidates, per backend.
+    Scaling {
+        /// comma-separated point counts
+        #[arg(long, default_value = "1000,10000,100000,1000000")]
+        points: String,
+        /// comma-separated candidate counts
+        #[arg(long, default_value = "1,8,64")]
+        candidates: String,
+        /// comma-separated backends (cpu, gpu)
+        #[arg(long, default_value = "cpu,gpu")]
+        backends: String,
+        /// seconds per cell
+        #[arg(long, default_value_t = 2.0)]
+        budget: f64,
+    },
 }
 
 /// The cloud a command reads.
@@ -219,6 +270,7 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
         Command::Fit(args) => fit(args),
         Command::Mesh(args) => mesh(args),
         Command::Serve(config) => serve(config),
+        Command::Bench(args) => bench(args),
     }
 }
 
@@ -398,4 +450,65 @@ fn serve(config: crate::service::ServiceConfig) -> Result<(), Failure> {
     runtime
         .block_on(crate::service::serve(config))
         .map_err(|e| Failure::input(format!("serve: {e}")))
+}
+
+fn parse_list(text: &str, what: &str) -> Result<Vec<usize>, Failure> {
+    text.split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<usize>()
+                .ok()
+                .filter(|&v| v > 0)
+                .ok_or_else(|| Failure::input(format!("{what}: {t:?} is not a positive integer")))
+        })
+        .collect()
+}
+
+fn bench(args: BenchArgs) -> Result<(), Failure> {
+    use crate::bench::{Report, write_report};
+    let backend = args
+        .backend
+        .or_else(Backend::from_env)
+        .unwrap_or(Backend::Auto);
+    let options = crate::fit::FitOptions::default();
+    let write = |report: &dyn Fn(&std::path::Path) -> std::io::Result<Vec<PathBuf>>, md: String| {
+        let paths = report(&args.out)
+            .map_err(|e| Failure::input(format!("{}: {e}", args.out.display())))?;
+        println!("{md}");
+        for p in paths {
+            eprintln!("wrote {}", p.display());
+        }
+        Ok(())
+    };
+    match &args.which {
+        BenchCommand::Paper { dir, runs } => {
+            let r =
+                crate::bench::paper::run(dir, *runs, backend, &options).map_err(Failure::input)?;
+            write(&|d| write_report(d, &r), r.markdown())
+        }
+        BenchCommand::Synthetic { cases, seed } => {
+            let r = crate::bench::synthetic::run(*cases, *seed, backend, &options)
+                .map_err(Failure::input)?;
+            write(&|d| write_report(d, &r), r.markdown())
+        }
+        BenchCommand::Scaling {
+            points,
+            candidates,
+            backends,
+            budget,
+        } => {
+            if !(budget.is_finite() && *budget > 0.0) {
+                return Err(Failure::input("--budget must be positive"));
+            }
+            let o = crate::bench::scaling::ScalingOptions {
+                points: parse_list(points, "--points")?,
+                candidates: parse_list(candidates, "--candidates")?,
+                backends: backends.split(',').map(|b| b.trim().to_owned()).collect(),
+                budget: *budget,
+                ..Default::default()
+            };
+            let r = crate::bench::scaling::run(&o).map_err(Failure::input)?;
+            write(&|d| write_report(d, &r), r.markdown())
+        }
+    }
 }

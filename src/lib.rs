@@ -12,8 +12,10 @@
 //! * [`io`]: cloud readers and writers.
 //! * [`fit`], [`solve`]: the two-stage fit and its interior-point solver.
 //! * [`service`]: the HTTP service (axum).
+//! * [`bench`]: the benchmark harness (paper clouds, ground-truth suite, scaling).
 //! * [`cli`]: the `supertoroid` command line.
 
+pub mod bench;
 pub mod cli;
 pub mod eval;
 pub mod fit;

@@ -36,6 +36,9 @@ pub struct FitOptions {
     pub a4_reward: f64,
     /// weight of the a3 penalty in stage 2 (favours the thinnest section the data allow)
     pub a3_penalty: f64,
+    /// a stage-1 runner-up with another hole axis goes on to stage 2 when its cost is
+    /// within this factor of the best's
+    pub runner_up_ratio: f64,
     /// Huber threshold of both stages, as a fraction of the cloud's RMS radius
     pub huber: f64,
     pub eps_min: f64,
@@ -52,6 +55,7 @@ impl Default for FitOptions {
             stage2_points: 1000,
             a4_reward: 1e-4,
             a3_penalty: 0.0,
+            runner_up_ratio: 1.3,
             huber: 0.05,
             eps_min: 0.1,
             eps_max: 2.0,
@@ -294,10 +298,21 @@ pub fn fit(
         opts1.fixed[10] = true;
     }
     let stage1 = solve(evaluator, &starts, &bounds, &opts1)?;
-    let best = stage1
-        .iter()
-        .min_by(|a, b| a.cost.total_cmp(&b.cost))
-        .expect("at least one start");
+    // The best start, and the runner-up when it is a different hole axis with a cost
+    // not far above: on a 150-point sample the two can swap places, and stage 2 on 1000
+    // points tells them apart (measured on the paper's pot: the runner-up fitted the
+    // points with half the RMS distance in 2 of 10 seeds).
+    let mut ranked: Vec<&crate::solve::Solution> = stage1.iter().collect();
+    ranked.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+    let best = ranked[0];
+    let mut finalists = vec![best.candidate];
+    if let Some(second) = ranked.iter().skip(1).find(|s| {
+        s.stop != crate::solve::Stop::Pruned
+            && s.cost <= o.runner_up_ratio * best.cost
+            && distinct_basin(&s.candidate.pose, &best.candidate.pose)
+    }) {
+        finalists.push(second.candidate);
+    }
     let stage1_iterations = stage1.iter().map(|s| s.iterations).max().unwrap_or(0);
     let t1 = start.elapsed();
 
@@ -313,7 +328,15 @@ pub fn fit(
         step_tolerance: 1e-4,
         ..Default::default()
     };
-    let stage2 = solve(evaluator, &[best.candidate], &bounds, &opts2)?.remove(0);
+    let stage2 = solve(evaluator, &finalists, &bounds, &opts2)?
+        .into_iter()
+        .min_by(|a, b| {
+            let merit = |s: &crate::solve::Solution| {
+                s.cost - o.a4_reward * s.candidate.shape.a4 * s.count as f64
+            };
+            merit(a).total_cmp(&merit(b))
+        })
+        .expect("one finalist at least");
     let t_total = start.elapsed();
 
     let (shape, pose) = norm.to_world(&stage2.candidate);
@@ -352,6 +375,19 @@ pub fn fit(
         },
         fitted: (shape, pose),
     })
+}
+
+/// Two poses in different basins of the fit: hole axes more than 10 degrees apart, or
+/// in-plane turns more than 20 degrees apart modulo the quarter turn (a squarish top view
+/// and its 45-degree-turned diamond are the classic pair).
+fn distinct_basin(a: &Pose, b: &Pose) -> bool {
+    if a.axis().dot(b.axis()).abs() < 10f64.to_radians().cos() {
+        return true;
+    }
+    let x = b.rotation.inverse() * (a.rotation * DVec3::X);
+    let turn = x.y.atan2(x.x).rem_euclid(std::f64::consts::FRAC_PI_2);
+    let turn = turn.min(std::f64::consts::FRAC_PI_2 - turn);
+    turn > 20f64.to_radians()
 }
 
 /// Distances of every input point to the fitted surface, summarised.

@@ -1,0 +1,233 @@
+//! `bench synthetic`: the ground-truth suite of issue 4. Case i (seed `seed + i`) falls in
+//! category i mod 18: full or single-view partial cloud x noise 0, 1, 2% of the size x
+//! outliers 0, 5, 10%. Success is `ground_truth::Errors::success` (centre 5% of size,
+//! axis 5 degrees, sizes and a4 10%, eps 0.15, up to the symmetries).
+
+use super::{Machine, Report, Stats};
+use crate::eval::{Backend, make_evaluator};
+use crate::fit::ground_truth::{compare, make_case};
+use crate::fit::{FitOptions, fit};
+use serde::Serialize;
+
+pub const NOISES: [f64; 3] = [0.0, 0.01, 0.02];
+pub const OUTLIERS: [f64; 3] = [0.0, 0.05, 0.10];
+
+/// (partial, noise, outliers) of case i.
+pub fn category(i: usize) -> (bool, f64, f64) {
+    let c = i % 18;
+    (c >= 9, NOISES[c % 3], OUTLIERS[(c / 3) % 3])
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Case {
+    pub seed: u64,
+    pub partial: bool,
+    pub noise: f64,
+    pub outliers: f64,
+    pub success: bool,
+    pub centre: f64,
+    pub axis_degrees: f64,
+    pub sizes: f64,
+    pub a4: f64,
+    pub eps: f64,
+    pub t_total_ms: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Category {
+    pub partial: bool,
+    pub noise: f64,
+    pub outliers: f64,
+    pub cases: usize,
+    pub successes: usize,
+    pub rate: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ErrorStats {
+    pub centre: Stats,
+    pub axis_degrees: Stats,
+    pub sizes: Stats,
+    pub a4: Stats,
+    pub eps: Stats,
+    pub t_total_ms: Stats,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SyntheticReport {
+    pub machine: Machine,
+    pub backend: String,
+    pub cases: Vec<Case>,
+    pub categories: Vec<Category>,
+    pub overall_rate: f64,
+    pub full_rate: f64,
+    pub partial_rate: f64,
+    pub partial_with_outliers_rate: f64,
+    pub errors_full: ErrorStats,
+    pub errors_partial: ErrorStats,
+}
+
+fn error_stats(cases: &[&Case]) -> ErrorStats {
+    let col = |f: fn(&Case) -> f64| Stats::of(&cases.iter().map(|c| f(c)).collect::<Vec<_>>());
+    ErrorStats {
+        centre: col(|c| c.centre),
+        axis_degrees: col(|c| c.axis_degrees),
+        sizes: col(|c| c.sizes),
+        a4: col(|c| c.a4),
+        eps: col(|c| c.eps),
+        t_total_ms: col(|c| c.t_total_ms),
+    }
+}
+
+fn rate<'a>(cases: impl Iterator<Item = &'a Case>) -> f64 {
+    let (n, ok) = cases.fold((0, 0), |(n, ok), c| (n + 1, ok + c.success as usize));
+    if n == 0 { 0.0 } else { ok as f64 / n as f64 }
+}
+
+pub fn run(
+    cases: usize,
+    seed: u64,
+    backend: Backend,
+    base: &FitOptions,
+) -> Result<SyntheticReport, String> {
+    if cases == 0 {
+        return Err("--cases must be at least 1".into());
+    }
+    let mut evaluator = make_evaluator(backend).map_err(|e| e.to_string())?;
+    let bar = super::progress(cases as u64, "ground-truth suite");
+    let mut out = Vec::with_capacity(cases);
+    for i in 0..cases {
+        let (partial, noise, outliers) = category(i);
+        let case_seed = seed + i as u64;
+        let case = make_case(case_seed, partial, noise, outliers);
+        let options = FitOptions {
+            seed: case_seed,
+            ..base.clone()
+        };
+        let report = fit(evaluator.as_mut(), &case.points, &options)
+            .map_err(|e| format!("case {case_seed}: {e}"))?;
+        let e = compare(
+            (&case.shape, &case.pose),
+            (&report.fitted.0, &report.fitted.1),
+        );
+        out.push(Case {
+            seed: case_seed,
+            partial,
+            noise,
+            outliers,
+            success: e.success(),
+            centre: e.centre,
+            axis_degrees: e.axis_degrees,
+            sizes: e.sizes,
+            a4: e.a4,
+            eps: e.eps,
+            t_total_ms: report.timing_ms.total,
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let mut categories = Vec::new();
+    for c in 0..18.min(cases) {
+        let (partial, noise, outliers) = category(c);
+        let members: Vec<&Case> = out
+            .iter()
+            .filter(|k| k.partial == partial && k.noise == noise && k.outliers == outliers)
+            .collect();
+        let successes = members.iter().filter(|k| k.success).count();
+        categories.push(Category {
+            partial,
+            noise,
+            outliers,
+            cases: members.len(),
+            successes,
+            rate: successes as f64 / members.len().max(1) as f64,
+        });
+    }
+    let full: Vec<&Case> = out.iter().filter(|c| !c.partial).collect();
+    let partial: Vec<&Case> = out.iter().filter(|c| c.partial).collect();
+    Ok(SyntheticReport {
+        machine: Machine::probe(),
+        backend: evaluator.device_name(),
+        overall_rate: rate(out.iter()),
+        full_rate: rate(full.iter().copied()),
+        partial_rate: rate(partial.iter().copied()),
+        partial_with_outliers_rate: rate(partial.iter().copied().filter(|c| c.outliers > 0.0)),
+        errors_full: error_stats(&full),
+        errors_partial: error_stats(&partial),
+        categories,
+        cases: out,
+    })
+}
+
+impl Report for SyntheticReport {
+    fn name(&self) -> &'static str {
+        "synthetic"
+    }
+
+    fn csv(&self) -> String {
+        let mut s = String::from(
+            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms\n",
+        );
+        for c in &self.cases {
+            s += &format!(
+                "{},{},{},{},{},{},{},{},{},{},{}\n",
+                c.seed,
+                c.partial,
+                c.noise,
+                c.outliers,
+                c.success,
+                c.centre,
+                c.axis_degrees,
+                c.sizes,
+                c.a4,
+                c.eps,
+                c.t_total_ms
+            );
+        }
+        s
+    }
+
+    fn markdown(&self) -> String {
+        let mut md = String::from("# Ground-truth suite\n\n");
+        md += &self.machine.markdown();
+        md += &format!(
+            "Evaluator: {}. {} cases. Success: overall {:.1}%, full clouds {:.1}%, single-view partial {:.1}%, partial with outliers {:.1}%.\n\n",
+            self.backend,
+            self.cases.len(),
+            100.0 * self.overall_rate,
+            100.0 * self.full_rate,
+            100.0 * self.partial_rate,
+            100.0 * self.partial_with_outliers_rate
+        );
+        md += "| cloud | noise | outliers | cases | success |\n|---|---:|---:|---:|---:|\n";
+        for c in &self.categories {
+            md += &format!(
+                "| {} | {:.0}% | {:.0}% | {} | {}/{} ({:.0}%) |\n",
+                if c.partial { "partial" } else { "full" },
+                100.0 * c.noise,
+                100.0 * c.outliers,
+                c.cases,
+                c.successes,
+                c.cases,
+                100.0 * c.rate
+            );
+        }
+        md += "\nError distributions (median / 90th percentile / max):\n\n| | centre / size | axis [deg] | sizes (rel.) | a4 (rel.) | eps | time [ms] |\n|---|---|---|---|---|---|---|\n";
+        for (name, e) in [
+            ("full", &self.errors_full),
+            ("partial", &self.errors_partial),
+        ] {
+            let f = |s: &Stats| format!("{:.3} / {:.3} / {:.3}", s.median, s.p90, s.max);
+            md += &format!(
+                "| {name} | {} | {} | {} | {} | {} | {} |\n",
+                f(&e.centre),
+                f(&e.axis_degrees),
+                f(&e.sizes),
+                f(&e.a4),
+                f(&e.eps),
+                f(&e.t_total_ms)
+            );
+        }
+        md
+    }
+}

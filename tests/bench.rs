@@ -1,0 +1,207 @@
+//! The benchmark harness on small settings: every sub-bench runs and writes JSON with
+//! every field, CSV and markdown; the Good / Decent / Bad rule grades a ground-truth fit
+//! Good and a planted bad fit Bad.
+
+use glam::{DQuat, DVec3};
+use serde_json::Value;
+use std::process::Command;
+use supertoroid::bench::paper::{Grade, grade_fit};
+use supertoroid::model::{Pose, Shape};
+
+fn out_dir(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("supertoroid-bench-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn bench(args: &[&str], out: &std::path::Path, name: &str) -> Value {
+    let o = Command::new(env!("CARGO_BIN_EXE_supertoroid"))
+        .arg("bench")
+        .args(args)
+        .args(["--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = std::fs::read_to_string(out.join(format!("{name}.md"))).unwrap();
+    assert!(md.contains("Machine:") && md.contains('|'), "{md}");
+    assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), md.trim());
+    let csv = std::fs::read_to_string(out.join(format!("{name}.csv"))).unwrap();
+    assert!(csv.lines().count() >= 2);
+    serde_json::from_str(&std::fs::read_to_string(out.join(format!("{name}.json"))).unwrap())
+        .unwrap()
+}
+
+fn has(v: &Value, keys: &[&str]) {
+    for k in keys {
+        assert!(!v[*k].is_null(), "missing {k} in {v}");
+    }
+}
+
+#[test]
+fn bench_paper_writes_the_table_with_every_field() {
+    let out = out_dir("paper");
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/clouds/paper");
+    let v = bench(
+        &["paper", dir, "--runs", "2", "--backend", "cpu"],
+        &out,
+        "paper",
+    );
+    has(
+        &v["machine"],
+        &["cpu", "cores", "adapter", "git_revision", "version"],
+    );
+    has(&v, &["backend", "rule", "median_total_ms"]);
+    let clouds = v["clouds"].as_array().unwrap();
+    assert_eq!(clouds.len(), 4);
+    for c in clouds {
+        has(
+            c,
+            &[
+                "cloud",
+                "points",
+                "good",
+                "decent",
+                "bad",
+                "t_stage1_ms",
+                "t_stage2_ms",
+                "t_total_ms",
+                "s_total_ms",
+                "median_relative_rms",
+                "centre_spread",
+                "axis_spread_deg",
+                "paper",
+            ],
+        );
+        let n = ["good", "decent", "bad"]
+            .iter()
+            .map(|k| c[*k].as_u64().unwrap())
+            .sum::<u64>();
+        assert_eq!(n, 2);
+        assert!(c["t_total_ms"].as_f64().unwrap() > 0.0);
+    }
+    assert_eq!(v["runs"].as_array().unwrap().len(), 8);
+    let csv = std::fs::read_to_string(out.join("paper.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 9);
+}
+
+#[test]
+fn bench_synthetic_and_scaling_write_every_field() {
+    let out = out_dir("synthetic");
+    let v = bench(
+        &["synthetic", "--cases", "5", "--backend", "cpu"],
+        &out,
+        "synthetic",
+    );
+    has(
+        &v,
+        &[
+            "machine",
+            "backend",
+            "overall_rate",
+            "full_rate",
+            "partial_rate",
+            "partial_with_outliers_rate",
+            "errors_full",
+            "errors_partial",
+        ],
+    );
+    let cases = v["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 5);
+    for c in cases {
+        has(
+            c,
+            &[
+                "seed",
+                "partial",
+                "noise",
+                "outliers",
+                "success",
+                "centre",
+                "axis_degrees",
+                "sizes",
+                "a4",
+                "eps",
+                "t_total_ms",
+            ],
+        );
+    }
+    assert_eq!(v["categories"].as_array().unwrap().len(), 5);
+
+    let out = out_dir("scaling");
+    let v = bench(
+        &[
+            "scaling",
+            "--points",
+            "500,2000",
+            "--candidates",
+            "1,4",
+            "--backends",
+            "cpu,gpu",
+            "--budget",
+            "0.05",
+        ],
+        &out,
+        "scaling",
+    );
+    let cells = v["cells"].as_array().unwrap();
+    assert_eq!(cells.len(), 8);
+    for c in cells {
+        has(
+            c,
+            &[
+                "backend",
+                "points",
+                "candidates",
+                "time_ms",
+                "point_jacobians_per_s",
+                "samples",
+            ],
+        );
+        assert!(c["time_ms"]["median"].as_f64().unwrap() > 0.0);
+    }
+    assert!(
+        cells
+            .iter()
+            .any(|c| c["backend"].as_str().unwrap().starts_with("gpu"))
+    );
+}
+
+#[test]
+fn the_grading_rule_calls_the_truth_good_and_a_planted_fit_bad() {
+    let shape = Shape::new(0.05, 0.045, 0.02, 2.0, 0.8, 1.1);
+    let pose = Pose::new(DQuat::from_rotation_y(0.4), DVec3::new(0.1, 0.0, 0.6));
+    let mut rng = supertoroid::synth::rng(3);
+    let mut points = supertoroid::synth::sample_surface(&shape, &pose, 2000, &mut rng);
+    supertoroid::synth::add_noise(&mut points, 0.005 * shape.size(), &mut rng);
+    let size = shape.size();
+    let truth = grade_fit(
+        &points,
+        (&shape, &pose),
+        pose.translation,
+        pose.axis(),
+        size,
+    );
+    assert_eq!(truth.grade, Grade::Good, "{truth:?}");
+    // the same shape, shifted by a fifth of its size and tilted 30 degrees
+    let planted = Pose::new(
+        DQuat::from_rotation_x(0.52) * pose.rotation,
+        pose.translation + DVec3::new(0.2 * size, 0.0, 0.0),
+    );
+    let bad = grade_fit(
+        &points,
+        (&shape, &planted),
+        pose.translation,
+        pose.axis(),
+        size,
+    );
+    assert_eq!(bad.grade, Grade::Bad, "{bad:?}");
+    // a right surface that disagrees with the consensus of the other runs is not Good
+    let far = grade_fit(
+        &points,
+        (&shape, &pose),
+        pose.translation + DVec3::X * 0.1 * size,
+        pose.axis(),
+        size,
+    );
+    assert_eq!(far.grade, Grade::Decent, "{far:?}");
+}
