@@ -53,6 +53,30 @@ pub enum Command {
     ///
     /// Example: supertoroid bench paper ../shared/clouds/paper --out bench-results
     Bench(BenchArgs),
+    /// Draw a cloud with its fitted surface from three views (along the hole axis, side,
+    /// oblique) into a PNG, headless on the GPU context (lavapipe works). Points are
+    /// coloured by distance to the fit: blue on the surface, red at 5% of the size.
+    ///
+    /// Example: supertoroid render mug.pcd -o mug.png   (fits first; or --fit fit.json)
+    Render(RenderArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub input: InputArgs,
+    /// the fit to draw (JSON of `supertoroid fit`); without it the cloud is fitted first
+    #[arg(long, conflicts_with = "no_fit")]
+    pub fit: Option<PathBuf>,
+    /// draw the points only
+    #[arg(long)]
+    pub no_fit: bool,
+    /// pixels per view (the image is 3 views wide)
+    #[arg(long, default_value_t = 400)]
+    pub size: u32,
+    /// output .png
+    #[arg(short, long)]
+    pub output: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -75,6 +99,9 @@ pub enum BenchCommand {
         dir: PathBuf,
         #[arg(long, default_value_t = 10)]
         runs: usize,
+        /// also draw each cloud with its seed-0 fit into --out/<cloud>.png
+        #[arg(long)]
+        render: bool,
     },
     /// The ground-truth suite: --cases seeded synthetic clouds over 18 categories (full /
     /// partial x noise x outliers); success rates and error distributions.
@@ -271,6 +298,7 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
         Command::Mesh(args) => mesh(args),
         Command::Serve(config) => serve(config),
         Command::Bench(args) => bench(args),
+        Command::Render(args) => render(args),
     }
 }
 
@@ -481,9 +509,10 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         Ok(())
     };
     match &args.which {
-        BenchCommand::Paper { dir, runs } => {
-            let r =
-                crate::bench::paper::run(dir, *runs, backend, &options).map_err(Failure::input)?;
+        BenchCommand::Paper { dir, runs, render } => {
+            let pictures = render.then_some((args.out.as_path(), 300));
+            let r = crate::bench::paper::run(dir, *runs, backend, &options, pictures)
+                .map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }
         BenchCommand::Synthetic { cases, seed } => {
@@ -511,4 +540,37 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
             write(&|d| write_report(d, &r), r.markdown())
         }
     }
+}
+
+fn render(args: RenderArgs) -> Result<(), Failure> {
+    let points = args.input.read()?;
+    let fit = if args.no_fit {
+        None
+    } else if let Some(path) = &args.fit {
+        let bytes = crate::io::read_bytes(path).map_err(|e| Failure::input(e.to_string()))?;
+        Some(
+            crate::fit::parse_report_json(&bytes)
+                .map_err(|e| Failure::input(format!("{}: {e}", path.display())))?,
+        )
+    } else {
+        let report = crate::fit::fit(
+            &mut crate::eval::CpuEvaluator::new(),
+            &points,
+            &Default::default(),
+        )
+        .map_err(|e| Failure::input(e.to_string()))?;
+        Some(report.fitted)
+    };
+    let png = crate::render::render_png(
+        &crate::render::Scene {
+            points: &points,
+            fit,
+        },
+        args.size,
+    )
+    .map_err(|e| Failure::input(format!("render: {e}")))?;
+    write_file(&args.output, |out| {
+        out.extend_from_slice(&png);
+        Ok(())
+    })
 }

@@ -13,6 +13,7 @@
 //! * [`fit`], [`solve`]: the two-stage fit and its interior-point solver.
 //! * [`service`]: the HTTP service (axum).
 //! * [`bench`]: the benchmark harness (paper clouds, ground-truth suite, scaling).
+//! * [`render`]: headless pictures of clouds and fits (wgpu render pipeline).
 //! * [`cli`]: the `supertoroid` command line.
 
 pub mod bench;
@@ -21,6 +22,7 @@ pub mod eval;
 pub mod fit;
 pub mod io;
 pub mod model;
+pub mod render;
 pub mod service;
 pub mod solve;
 pub mod synth;

@@ -42,7 +42,7 @@ fn bench_paper_writes_the_table_with_every_field() {
     let out = out_dir("paper");
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/clouds/paper");
     let v = bench(
-        &["paper", dir, "--runs", "2", "--backend", "cpu"],
+        &["paper", dir, "--runs", "2", "--backend", "cpu", "--render"],
         &out,
         "paper",
     );
@@ -80,6 +80,15 @@ fn bench_paper_writes_the_table_with_every_field() {
         assert!(c["t_total_ms"].as_f64().unwrap() > 0.0);
     }
     assert_eq!(v["runs"].as_array().unwrap().len(), 8);
+    // one picture per cloud, embedded in the markdown
+    let md = std::fs::read_to_string(out.join("paper.md")).unwrap();
+    let pictures = v["pictures"].as_array().unwrap();
+    assert_eq!(pictures.len(), 4);
+    for p in pictures {
+        let name = p.as_str().unwrap();
+        assert!(out.join(name).is_file(), "{name}");
+        assert!(md.contains(&format!("]({name})")), "{name} not embedded");
+    }
     let csv = std::fs::read_to_string(out.join("paper.csv")).unwrap();
     assert_eq!(csv.lines().count(), 9);
 }

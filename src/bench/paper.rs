@@ -133,6 +133,8 @@ pub struct PaperReport {
     pub runs: Vec<Run>,
     /// median total fit time over every run, milliseconds
     pub median_total_ms: f64,
+    /// pictures of each cloud with its seed-0 fit (file names relative to the report)
+    pub pictures: Vec<String>,
 }
 
 const RULE: &str = "Good: relative RMS <= 3%, coverage >= 75%, centre within 5% of the size and axis within 5 deg of the medoid over the runs; Decent: 6%, 50%, 15%, 15 deg; Bad otherwise";
@@ -203,11 +205,14 @@ pub fn grade_runs(points: &[DVec3], fits: &[&FitReport]) -> Vec<Graded> {
 }
 
 /// Fits every cloud file in `dir` (PCD, PLY, XYZ) `runs` times.
+/// With `render: Some((out_dir, size))`, also draws each cloud with its seed-0 fit into
+/// `out_dir/<cloud>.png`.
 pub fn run(
     dir: &Path,
     runs: usize,
     backend: Backend,
     base: &FitOptions,
+    render: Option<(&Path, u32)>,
 ) -> Result<PaperReport, String> {
     let mut files: Vec<_> = std::fs::read_dir(dir)
         .map_err(|e| format!("{}: {e}", dir.display()))?
@@ -228,6 +233,7 @@ pub fn run(
     let bar = super::progress((files.len() * runs) as u64, "paper clouds");
     let mut rows = Vec::new();
     let mut all_runs = Vec::new();
+    let mut pictures = Vec::new();
     for file in &files {
         let stem = file
             .file_stem()
@@ -246,6 +252,19 @@ pub fn run(
                 fit(evaluator.as_mut(), &points, &options).map_err(|e| format!("{stem}: {e}"))?;
             fits.push(report);
             bar.inc(1);
+        }
+        if let Some((out, size)) = render {
+            let png = crate::render::render_png(
+                &crate::render::Scene {
+                    points: &points,
+                    fit: Some(fits[0].fitted),
+                },
+                size,
+            )?;
+            std::fs::create_dir_all(out).map_err(|e| e.to_string())?;
+            let name = format!("{stem}.png");
+            std::fs::write(out.join(&name), png).map_err(|e| e.to_string())?;
+            pictures.push(name);
         }
         let refs: Vec<&FitReport> = fits.iter().collect();
         let grades = grade_runs(&points, &refs);
@@ -297,6 +316,7 @@ pub fn run(
         clouds: rows,
         runs: all_runs,
         median_total_ms: Stats::of(&totals).median,
+        pictures,
     })
 }
 
@@ -375,6 +395,11 @@ impl Report for PaperReport {
             "\nMedian total fit time over all runs: {:.1} ms.\n",
             self.median_total_ms
         );
+        for p in &self.pictures {
+            md += &format!(
+                "\n![{p}: the cloud (blue on the surface, red 5% of the size off it) and its seed-0 fit; along the hole axis, from the side, oblique]({p})\n"
+            );
+        }
         md
     }
 }
