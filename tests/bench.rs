@@ -135,6 +135,7 @@ fn bench_synthetic_and_scaling_write_every_field() {
         );
     }
     assert_eq!(v["categories"].as_array().unwrap().len(), 5);
+    png_with_content(&out.join("synthetic-errors.png"), 5 * 300, 300);
 
     let out = out_dir("scaling");
     let v = bench(
@@ -172,6 +173,35 @@ fn bench_synthetic_and_scaling_write_every_field() {
         cells
             .iter()
             .any(|c| c["backend"].as_str().unwrap().starts_with("gpu"))
+    );
+    png_with_content(&out.join("scaling.png"), 2 * 360, 360);
+    assert!(
+        std::fs::read_to_string(out.join("scaling.md"))
+            .unwrap()
+            .contains("](scaling.png)")
+    );
+}
+
+/// A PNG of the given size with lines on it (not blank).
+fn png_with_content(path: &std::path::Path, width: u32, height: u32) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(
+        (info.width, info.height),
+        (width, height),
+        "{}",
+        path.display()
+    );
+    let coloured = buf[..info.buffer_size()]
+        .chunks_exact(3)
+        .filter(|p| p[0] != p[1] || p[1] != p[2])
+        .count();
+    assert!(
+        coloured > 500,
+        "{}: {coloured} coloured pixels",
+        path.display()
     );
 }
 

@@ -4,6 +4,7 @@
 //! CSV (for machines) and markdown (for people), with the machine and git revision.
 
 pub mod paper;
+pub mod plot;
 pub mod scaling;
 pub mod synthetic;
 
@@ -70,6 +71,10 @@ pub trait Report: Serialize {
     /// CSV: header line, then one line per row.
     fn csv(&self) -> String;
     fn markdown(&self) -> String;
+    /// Plots to write beside the report: (file name, PNG bytes).
+    fn plots(&self) -> Result<Vec<(String, Vec<u8>)>, String> {
+        Ok(Vec::new())
+    }
 }
 
 /// Writes `<dir>/<name>.json`, `.csv` and `.md`; returns their paths.
@@ -84,7 +89,13 @@ pub fn write_report(dir: &Path, report: &impl Report) -> std::io::Result<Vec<std
     std::fs::write(&paths[0], serde_json::to_string_pretty(report)?)?;
     std::fs::write(&paths[1], report.csv())?;
     std::fs::write(&paths[2], report.markdown())?;
-    Ok(paths.to_vec())
+    let mut paths = paths.to_vec();
+    for (name, png) in report.plots().map_err(std::io::Error::other)? {
+        let path = dir.join(name);
+        std::fs::write(&path, png)?;
+        paths.push(path);
+    }
+    Ok(paths)
 }
 
 /// A progress bar on a terminal, nothing otherwise (indicatif hides itself when stderr

@@ -169,6 +169,38 @@ impl Report for ScalingReport {
         s
     }
 
+    fn plots(&self) -> Result<Vec<(String, Vec<u8>)>, String> {
+        use super::plot::{COLORS, Panel, Series, panels_png};
+        let mut backends: Vec<&str> = self.cells.iter().map(|c| c.backend.as_str()).collect();
+        backends.dedup();
+        let mut ks: Vec<usize> = self.cells.iter().map(|c| c.candidates).collect();
+        ks.sort();
+        ks.dedup();
+        let panels: Vec<Panel> = backends
+            .iter()
+            .map(|b| Panel {
+                series: ks
+                    .iter()
+                    .enumerate()
+                    .map(|(i, k)| Series {
+                        color: COLORS[i % COLORS.len()],
+                        points: self
+                            .cells
+                            .iter()
+                            .filter(|c| c.backend == *b && c.candidates == *k)
+                            .filter_map(|c| c.time_ms.map(|t| (c.points as f64, t.median)))
+                            .collect(),
+                    })
+                    .collect(),
+                log_x: true,
+                log_y: true,
+                marker_x: None,
+                y_range: None,
+            })
+            .collect();
+        Ok(vec![("scaling.png".into(), panels_png(&panels, 360)?)])
+    }
+
     fn markdown(&self) -> String {
         let mut md = String::from("# Evaluator scaling\n\n");
         md += &self.machine.markdown();
@@ -192,6 +224,7 @@ impl Report for ScalingReport {
                 c.backend, c.points, c.candidates, t, rate
             );
         }
+        md += "\n![Milliseconds per iteration against points (log-log), one panel per backend in the table's order; blue, red, green, ... for the candidate counts in increasing order](scaling.png)\n";
         md
     }
 }

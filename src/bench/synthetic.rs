@@ -187,6 +187,40 @@ impl Report for SyntheticReport {
         s
     }
 
+    fn plots(&self) -> Result<Vec<(String, Vec<u8>)>, String> {
+        use super::plot::{COLORS, Panel, Series, cdf, panels_png};
+        let metric = |f: fn(&Case) -> f64, threshold: f64| Panel {
+            series: [false, true]
+                .iter()
+                .enumerate()
+                .map(|(i, partial)| Series {
+                    color: COLORS[i],
+                    points: cdf(&self
+                        .cases
+                        .iter()
+                        .filter(|c| c.partial == *partial)
+                        .map(|c| f(c).max(1e-4))
+                        .collect::<Vec<_>>()),
+                })
+                .collect(),
+            log_x: true,
+            log_y: false,
+            marker_x: Some(threshold),
+            y_range: Some((0.0, 1.0)),
+        };
+        let png = panels_png(
+            &[
+                metric(|c| c.centre, 0.05),
+                metric(|c| c.axis_degrees, 5.0),
+                metric(|c| c.sizes, 0.10),
+                metric(|c| c.a4, 0.10),
+                metric(|c| c.eps, 0.15),
+            ],
+            300,
+        )?;
+        Ok(vec![("synthetic-errors.png".into(), png)])
+    }
+
     fn markdown(&self) -> String {
         let mut md = String::from("# Ground-truth suite\n\n");
         md += &self.machine.markdown();
@@ -228,6 +262,7 @@ impl Report for SyntheticReport {
                 f(&e.t_total_ms)
             );
         }
+        md += "\n![Cumulative distributions of the errors (log x): centre / size, axis degrees, sizes, a4, eps; blue full clouds, red partial; the vertical line is the success bound](synthetic-errors.png)\n";
         md
     }
 }

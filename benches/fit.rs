@@ -1,0 +1,42 @@
+//! One whole fit (both stages, default options) of each paper cloud, on the CPU and GPU
+//! evaluators. `cargo bench --bench fit` (lavapipe is the GPU on a machine without one).
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use std::time::Duration;
+use supertoroid::eval::*;
+use supertoroid::fit::{FitOptions, fit};
+
+fn bench_fit(c: &mut Criterion) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/clouds/paper");
+    let clouds: Vec<(String, Vec<glam::DVec3>)> =
+        ["gearclean", "pot2clean", "perfectnoisedisplaced", "roll"]
+            .iter()
+            .map(|n| {
+                let points = supertoroid::io::read_cloud(&dir.join(format!("{n}.pcd")), None)
+                    .expect("the paper's clouds in ../shared/clouds/paper");
+                (n.to_string(), points)
+            })
+            .collect();
+    let mut evaluators: Vec<Box<dyn Evaluator>> = vec![Box::new(CpuEvaluator::new())];
+    match GpuContext::shared(&AdapterChoice::from_env()) {
+        Ok(ctx) => evaluators.push(Box::new(GpuEvaluator::new(ctx))),
+        Err(e) => eprintln!("no GPU adapter, CPU only: {e}"),
+    }
+    let mut group = c.benchmark_group("fit");
+    group
+        .sample_size(20)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(3));
+    for evaluator in &mut evaluators {
+        let kind = evaluator.kind();
+        for (name, points) in &clouds {
+            group.bench_function(BenchmarkId::new(kind, name), |b| {
+                b.iter(|| fit(evaluator.as_mut(), points, &FitOptions::default()).unwrap())
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_fit);
+criterion_main!(benches);
