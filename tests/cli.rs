@@ -214,3 +214,98 @@ fn distance_on_the_gpu_matches_the_cpu() {
         assert!((a - b).abs() < 1e-4 * size, "{a} vs {b}");
     }
 }
+
+#[test]
+fn fit_reads_stdin_writes_mesh_and_residuals_and_mesh_reads_the_json() {
+    use std::io::Write;
+    let cloud = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/clouds/paper/roll.pcd"
+    );
+    let bytes = std::fs::read(cloud).unwrap();
+    let (mesh, residuals, json) = (tmp("roll-mesh.ply"), tmp("roll-res.ply"), tmp("roll.json"));
+    let mut child = bin()
+        .args([
+            "fit",
+            "-",
+            "--format",
+            "pcd",
+            "--backend",
+            "cpu",
+            "--seed",
+            "2",
+        ])
+        .args(["--mesh", mesh.to_str().unwrap()])
+        .args(["--residuals", residuals.to_str().unwrap()])
+        .args(["-o", json.to_str().unwrap()])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(&bytes).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(report["points"]["input"], 8406);
+
+    // the mesh: a PLY with vertices, normals and faces, and every vertex on the fitted surface
+    let header = |path: &std::path::Path| {
+        let b = std::fs::read(path).unwrap();
+        let end = b.windows(11).position(|w| w == b"end_header\n").unwrap();
+        String::from_utf8_lossy(&b[..end]).into_owned()
+    };
+    let h = header(&mesh);
+    assert!(
+        h.contains("element vertex 8192")
+            && h.contains("property float nx")
+            && h.contains("element face 16384"),
+        "{h}"
+    );
+    let h = header(&residuals);
+    assert!(
+        h.contains("element vertex 8406")
+            && h.contains("property uchar red")
+            && h.contains("property float distance"),
+        "{h}"
+    );
+    let vertices = supertoroid::io::read_cloud(&mesh, None).unwrap();
+    let (shape, pose) =
+        supertoroid::fit::parse_report_json(&std::fs::read(&json).unwrap()).unwrap();
+    let worst = vertices
+        .iter()
+        .map(|v| supertoroid::model::meridian_distance(&shape, pose.to_canonical(*v)).distance)
+        .fold(0.0, f64::max);
+    assert!(
+        worst < 1e-5 * shape.size().max(1.0),
+        "mesh vertex {worst} off the surface"
+    );
+
+    // `mesh --fit` redraws the same surface from the JSON
+    let again = tmp("roll-again.ply");
+    let o = bin()
+        .args([
+            "mesh",
+            "--fit",
+            json.to_str().unwrap(),
+            "-o",
+            again.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        std::fs::read(&again).unwrap(),
+        std::fs::read(&mesh).unwrap()
+    );
+    // a broken JSON is bad input
+    let o = bin()
+        .args(["mesh", "--fit", cloud, "-o", again.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+}

@@ -726,3 +726,75 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
     let fit_schema = &doc["components"]["schemas"]["FitResponse"];
     assert!(fit_schema.to_string().contains("request_id"));
 }
+
+#[test]
+fn sigterm_lets_the_in_flight_fit_finish() {
+    // a real `supertoroid serve` process on a free port
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let mut server = Command::new(env!("CARGO_BIN_EXE_supertoroid"))
+        .args([
+            "serve",
+            "--bind",
+            &format!("127.0.0.1:{port}"),
+            "--backend",
+            "cpu",
+        ])
+        .env("SUPERTOROID_LOG_FORMAT", "json")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let url = format!("http://127.0.0.1:{port}");
+    let c = client();
+    let started = std::time::Instant::now();
+    while c.get(format!("{url}/healthz")).send().is_err() {
+        assert!(started.elapsed().as_secs() < 30, "server did not start");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let case = supertoroid::fit::ground_truth::make_case(7, false, 0.01, 0.0);
+    let points: Vec<[f64; 3]> =
+        synth::sample_surface(&case.shape, &case.pose, 50_000, &mut synth::rng(7))
+            .iter()
+            .map(|p| p.to_array())
+            .collect();
+    // a slow fit (every point in both stages: seconds), and SIGTERM while it runs
+    let body =
+        json!({"points": points, "options": {"stage1_points": 50000, "stage2_points": 50000}});
+    let sent = std::time::Instant::now();
+    let response = std::thread::scope(|scope| {
+        let request = scope.spawn(|| c.post(format!("{url}/v1/fit")).json(&body).send().unwrap());
+        std::thread::sleep(std::time::Duration::from_millis(400));
+        let kill = Command::new("kill")
+            .args(["-TERM", &server.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(kill.success());
+        request.join().unwrap()
+    });
+    assert_eq!(response.status(), 200);
+    // the fit was still running when the signal came
+    assert!(
+        sent.elapsed().as_millis() > 600,
+        "the fit ended too soon to test shutdown"
+    );
+    let status = server.wait().unwrap();
+    assert!(status.success(), "{status:?}");
+    let mut logs = String::new();
+    use std::io::Read;
+    server
+        .stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut logs)
+        .unwrap();
+    // structured JSON logs on stdout, one object per line
+    assert!(
+        logs.lines()
+            .any(|l| l.contains("\"route\":\"/v1/fit\"") && l.contains("\"status\":200")),
+        "{logs}"
+    );
+}
