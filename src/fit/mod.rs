@@ -392,8 +392,9 @@ fn distinct_basin(a: &Pose, b: &Pose) -> bool {
 
 /// Distances of every input point to the fitted surface, summarised.
 pub fn quality(shape: &Shape, pose: &Pose, points: &[DVec3]) -> Quality {
+    use rayon::prelude::*;
     let mut d: Vec<f64> = points
-        .iter()
+        .par_iter()
         .map(|p| meridian_distance(shape, pose.to_canonical(*p)).distance)
         .collect();
     let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len().max(1) as f64).sqrt();
