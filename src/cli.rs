@@ -89,6 +89,10 @@ pub struct BenchArgs {
     /// evaluator for the fits (paper, synthetic): auto, gpu, cpu
     #[arg(long, global = true, value_enum)]
     pub backend: Option<Backend>,
+    /// draw pictures (paper: each cloud with its seed-0 fit; synthetic: up to six failed
+    /// cases) into DIR, relative to --out unless absolute; the report embeds them
+    #[arg(long, global = true)]
+    pub render: Option<PathBuf>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -99,9 +103,6 @@ pub enum BenchCommand {
         dir: PathBuf,
         #[arg(long, default_value_t = 10)]
         runs: usize,
-        /// also draw each cloud with its seed-0 fit into --out/<cloud>.png
-        #[arg(long)]
-        render: bool,
     },
     /// The ground-truth suite: --cases seeded synthetic clouds over 18 categories (full /
     /// partial x noise x outliers); success rates and error distributions.
@@ -499,6 +500,10 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         .or_else(Backend::from_env)
         .unwrap_or(Backend::Auto);
     let options = crate::fit::FitOptions::default();
+    let render = args
+        .render
+        .as_ref()
+        .map(|dir| crate::bench::RenderTarget::new(&args.out, dir, 300));
     let write = |report: &dyn Fn(&std::path::Path) -> std::io::Result<Vec<PathBuf>>, md: String| {
         let paths = report(&args.out)
             .map_err(|e| Failure::input(format!("{}: {e}", args.out.display())))?;
@@ -509,14 +514,13 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         Ok(())
     };
     match &args.which {
-        BenchCommand::Paper { dir, runs, render } => {
-            let pictures = render.then_some((args.out.as_path(), 300));
-            let r = crate::bench::paper::run(dir, *runs, backend, &options, pictures)
+        BenchCommand::Paper { dir, runs } => {
+            let r = crate::bench::paper::run(dir, *runs, backend, &options, render.as_ref())
                 .map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }
         BenchCommand::Synthetic { cases, seed } => {
-            let r = crate::bench::synthetic::run(*cases, *seed, backend, &options)
+            let r = crate::bench::synthetic::run(*cases, *seed, backend, &options, render.as_ref())
                 .map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }

@@ -42,7 +42,16 @@ fn bench_paper_writes_the_table_with_every_field() {
     let out = out_dir("paper");
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/clouds/paper");
     let v = bench(
-        &["paper", dir, "--runs", "2", "--backend", "cpu", "--render"],
+        &[
+            "paper",
+            dir,
+            "--runs",
+            "2",
+            "--backend",
+            "cpu",
+            "--render",
+            "pictures",
+        ],
         &out,
         "paper",
     );
@@ -86,6 +95,7 @@ fn bench_paper_writes_the_table_with_every_field() {
     assert_eq!(pictures.len(), 4);
     for p in pictures {
         let name = p.as_str().unwrap();
+        assert!(name.starts_with("pictures/"), "{name}");
         assert!(out.join(name).is_file(), "{name}");
         assert!(md.contains(&format!("]({name})")), "{name} not embedded");
     }
@@ -97,7 +107,15 @@ fn bench_paper_writes_the_table_with_every_field() {
 fn bench_synthetic_and_scaling_write_every_field() {
     let out = out_dir("synthetic");
     let v = bench(
-        &["synthetic", "--cases", "5", "--backend", "cpu"],
+        &[
+            "synthetic",
+            "--cases",
+            "5",
+            "--backend",
+            "cpu",
+            "--render",
+            "shots",
+        ],
         &out,
         "synthetic",
     );
@@ -136,6 +154,12 @@ fn bench_synthetic_and_scaling_write_every_field() {
     }
     assert_eq!(v["categories"].as_array().unwrap().len(), 5);
     png_with_content(&out.join("synthetic-errors.png"), 5 * 300, 300);
+    let failures = cases.iter().filter(|c| c["success"] == false).count();
+    let shots = v["pictures"].as_array().unwrap();
+    assert_eq!(shots.len(), failures.min(6));
+    for p in shots {
+        assert!(out.join(p.as_str().unwrap()).is_file());
+    }
 
     let out = out_dir("scaling");
     let v = bench(

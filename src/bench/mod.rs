@@ -111,6 +111,46 @@ pub fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
     bar
 }
 
+/// Where `--render DIR` pictures go: written to `dir`, linked from the report as
+/// `link/<name>` (DIR relative to the report directory, unless absolute).
+#[derive(Clone, Debug)]
+pub struct RenderTarget {
+    pub dir: std::path::PathBuf,
+    pub link: std::path::PathBuf,
+    /// pixels per view
+    pub size: u32,
+}
+
+impl RenderTarget {
+    pub fn new(out: &Path, dir: &Path, size: u32) -> Self {
+        Self {
+            dir: out.join(dir),
+            link: dir.to_path_buf(),
+            size,
+        }
+    }
+
+    /// Draws a cloud and its fit; returns the link for the markdown.
+    pub fn draw(
+        &self,
+        name: &str,
+        points: &[glam::DVec3],
+        fit: (crate::model::Shape, crate::model::Pose),
+    ) -> Result<String, String> {
+        let png = crate::render::render_png(
+            &crate::render::Scene {
+                points,
+                fit: Some(fit),
+            },
+            self.size,
+        )?;
+        std::fs::create_dir_all(&self.dir).map_err(|e| format!("{}: {e}", self.dir.display()))?;
+        let file = format!("{name}.png");
+        std::fs::write(self.dir.join(&file), png).map_err(|e| e.to_string())?;
+        Ok(self.link.join(file).to_string_lossy().into_owned())
+    }
+}
+
 /// Median and spread of a sample.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
 pub struct Stats {

@@ -133,7 +133,7 @@ pub struct PaperReport {
     pub runs: Vec<Run>,
     /// median total fit time over every run, milliseconds
     pub median_total_ms: f64,
-    /// pictures of each cloud with its seed-0 fit (file names relative to the report)
+    /// pictures of each cloud with its seed-0 fit (paths relative to the report)
     pub pictures: Vec<String>,
 }
 
@@ -205,14 +205,13 @@ pub fn grade_runs(points: &[DVec3], fits: &[&FitReport]) -> Vec<Graded> {
 }
 
 /// Fits every cloud file in `dir` (PCD, PLY, XYZ) `runs` times.
-/// With `render: Some((out_dir, size))`, also draws each cloud with its seed-0 fit into
-/// `out_dir/<cloud>.png`.
+/// With `render`, also draws each cloud with its seed-0 fit.
 pub fn run(
     dir: &Path,
     runs: usize,
     backend: Backend,
     base: &FitOptions,
-    render: Option<(&Path, u32)>,
+    render: Option<&super::RenderTarget>,
 ) -> Result<PaperReport, String> {
     let mut files: Vec<_> = std::fs::read_dir(dir)
         .map_err(|e| format!("{}: {e}", dir.display()))?
@@ -253,18 +252,8 @@ pub fn run(
             fits.push(report);
             bar.inc(1);
         }
-        if let Some((out, size)) = render {
-            let png = crate::render::render_png(
-                &crate::render::Scene {
-                    points: &points,
-                    fit: Some(fits[0].fitted),
-                },
-                size,
-            )?;
-            std::fs::create_dir_all(out).map_err(|e| e.to_string())?;
-            let name = format!("{stem}.png");
-            std::fs::write(out.join(&name), png).map_err(|e| e.to_string())?;
-            pictures.push(name);
+        if let Some(target) = render {
+            pictures.push(target.draw(&stem, &points, fits[0].fitted)?);
         }
         let refs: Vec<&FitReport> = fits.iter().collect();
         let grades = grade_runs(&points, &refs);

@@ -65,6 +65,8 @@ pub struct SyntheticReport {
     pub partial_with_outliers_rate: f64,
     pub errors_full: ErrorStats,
     pub errors_partial: ErrorStats,
+    /// pictures of failed cases (paths relative to the report)
+    pub pictures: Vec<String>,
 }
 
 fn error_stats(cases: &[&Case]) -> ErrorStats {
@@ -84,11 +86,13 @@ fn rate<'a>(cases: impl Iterator<Item = &'a Case>) -> f64 {
     if n == 0 { 0.0 } else { ok as f64 / n as f64 }
 }
 
+/// With `render`, draws up to six failed cases (cloud and fit; the truth is in the CSV).
 pub fn run(
     cases: usize,
     seed: u64,
     backend: Backend,
     base: &FitOptions,
+    render: Option<&super::RenderTarget>,
 ) -> Result<SyntheticReport, String> {
     if cases == 0 {
         return Err("--cases must be at least 1".into());
@@ -96,6 +100,7 @@ pub fn run(
     let mut evaluator = make_evaluator(backend).map_err(|e| e.to_string())?;
     let bar = super::progress(cases as u64, "ground-truth suite");
     let mut out = Vec::with_capacity(cases);
+    let mut pictures = Vec::new();
     for i in 0..cases {
         let (partial, noise, outliers) = category(i);
         let case_seed = seed + i as u64;
@@ -110,6 +115,16 @@ pub fn run(
             (&case.shape, &case.pose),
             (&report.fitted.0, &report.fitted.1),
         );
+        if let Some(target) = render
+            && !e.success()
+            && pictures.len() < 6
+        {
+            pictures.push(target.draw(
+                &format!("case-{case_seed}"),
+                &case.points,
+                report.fitted,
+            )?);
+        }
         out.push(Case {
             seed: case_seed,
             partial,
@@ -156,6 +171,7 @@ pub fn run(
         errors_partial: error_stats(&partial),
         categories,
         cases: out,
+        pictures,
     })
 }
 
@@ -261,6 +277,9 @@ impl Report for SyntheticReport {
                 f(&e.eps),
                 f(&e.t_total_ms)
             );
+        }
+        for p in &self.pictures {
+            md += &format!("\n![a failed case: cloud and fit]({p})\n");
         }
         md += "\n![Cumulative distributions of the errors (log x): centre / size, axis degrees, sizes, a4, eps; blue full clouds, red partial; the vertical line is the success bound](synthetic-errors.png)\n";
         md
