@@ -146,10 +146,11 @@ impl Fitter {
             self.waiting.fetch_sub(1, Ordering::Relaxed);
             let worker = worker.map_err(|_| ApiError::overloaded())?;
             let degraded = self.degraded.clone();
+            let serial = self.worker_count > 1;
             tokio::task::spawn_blocking(move || {
                 let _permits = (admission, worker);
                 jobs.into_iter()
-                    .map(|job| run_one(job, gpu.as_ref(), &degraded))
+                    .map(|job| run_one(job, gpu.as_ref(), &degraded, serial))
                     .collect::<Vec<_>>()
             })
             .await
@@ -172,9 +173,33 @@ impl Fitter {
     }
 }
 
+thread_local! {
+    /// A one-thread rayon pool per fit worker: with `workers` fits in parallel, the CPU
+    /// evaluator's own parallelism would only oversubscribe the cores and lengthen the
+    /// tail latency.
+    static SERIAL: Option<rayon::ThreadPool> =
+        rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
+}
+
 /// One fit on the requested evaluator; a GPU failure marks the service degraded and the
 /// fit is redone on the CPU.
 fn run_one(
+    job: FitJob,
+    gpu: Option<&Arc<GpuContext>>,
+    degraded: &Mutex<Option<String>>,
+    serial: bool,
+) -> Result<FitReport, ApiError> {
+    if serial {
+        SERIAL.with(|pool| match pool {
+            Some(pool) => pool.install(|| run_one_here(job, gpu, degraded)),
+            None => run_one_here(job, gpu, degraded),
+        })
+    } else {
+        run_one_here(job, gpu, degraded)
+    }
+}
+
+fn run_one_here(
     job: FitJob,
     gpu: Option<&Arc<GpuContext>>,
     degraded: &Mutex<Option<String>>,
