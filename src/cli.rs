@@ -187,6 +187,10 @@ pub struct FitArgs {
     /// known hole axis x,y,z in the cloud's frame (e.g. 0,0,1 for "on a table, hole up")
     #[arg(long, allow_hyphen_values = true)]
     pub axis: Option<String>,
+    /// known section half-height a3 in the cloud's units (held fixed): one view cannot
+    /// tell how thick an object is
+    #[arg(long)]
+    pub a3: Option<f64>,
     /// also write the fitted surface as a PLY mesh with normals
     #[arg(long)]
     pub mesh: Option<PathBuf>,
@@ -389,6 +393,7 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         stage1_points: args.stage1_points,
         stage2_points: args.stage2_points,
         known_axis,
+        known_a3: args.a3,
         ..Default::default()
     };
     let backend = args

@@ -63,6 +63,15 @@ impl Drop for Server {
     }
 }
 
+/// A fittable cloud as JSON points.
+fn planar_ok() -> Vec<[f64; 3]> {
+    supertoroid::fit::ground_truth::make_case(3, false, 0.0, 0.0)
+        .points
+        .iter()
+        .map(|p| p.to_array())
+        .collect()
+}
+
 fn cpu_config() -> ServiceConfig {
     ServiceConfig {
         backend: Backend::Cpu,
@@ -351,6 +360,13 @@ fn every_bad_input_class_gets_its_status_and_a_json_error() {
             json_case(json!({"points": planar})),
             422,
             "degenerate_cloud",
+        ),
+        (
+            "negative a3",
+            "/v1/fit",
+            json_case(json!({"points": planar_ok(), "options": {"a3": -0.01}})),
+            422,
+            "invalid_option",
         ),
         (
             "zero axis",

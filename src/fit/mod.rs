@@ -45,6 +45,9 @@ pub struct FitOptions {
     pub eps_max: f64,
     /// prior: the hole axis in world coordinates, if known (e.g. "on a table, hole up")
     pub known_axis: Option<DVec3>,
+    /// prior: the section half-height a3 in world units, if known (a one-sided view
+    /// cannot tell how thick an object is; a product's dimensions can)
+    pub known_a3: Option<f64>,
 }
 
 impl Default for FitOptions {
@@ -60,6 +63,7 @@ impl Default for FitOptions {
             eps_min: 0.1,
             eps_max: 2.0,
             known_axis: None,
+            known_a3: None,
         }
     }
 }
@@ -296,6 +300,19 @@ pub fn fit(
     if o.known_axis.is_some() {
         opts1.fixed[9] = true;
         opts1.fixed[10] = true;
+    }
+    if let Some(a3) = o.known_a3 {
+        let a3 = a3 / norm.scale;
+        if !(a3.is_finite() && (0.002..=5.0).contains(&a3)) {
+            return Err(FitError::InvalidOption(format!(
+                "a3 = {} is not a plausible half-height for a cloud of this size",
+                a3 * norm.scale
+            )));
+        }
+        for start in &mut starts {
+            start.shape.a3 = a3;
+        }
+        opts1.fixed[2] = true;
     }
     let stage1 = solve(evaluator, &starts, &bounds, &opts1)?;
     // The best start, and the runner-up when it is a different hole axis with a cost

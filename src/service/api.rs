@@ -44,6 +44,8 @@ pub struct FitRequestOptions {
     /// table, hole up" in a z-up frame
     #[param(value_type = Option<Vec<f64>>)]
     pub axis: Option<[f64; 3]>,
+    /// prior: the section half-height a3 in the cloud's units (held fixed)
+    pub a3: Option<f64>,
     /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
     pub format: Option<Format>,
 }
@@ -81,6 +83,7 @@ impl FitRequestOptions {
                 stage1_points: limit(self.stage1_points, defaults.stage1_points, "stage1_points")?,
                 stage2_points: limit(self.stage2_points, defaults.stage2_points, "stage2_points")?,
                 known_axis,
+                known_a3: self.a3,
                 ..defaults
             },
             backend: self.backend.unwrap_or(Backend::Auto),

@@ -16,7 +16,8 @@ pub struct ServiceConfig {
     /// address to listen on
     #[arg(long, env = "SUPERTOROID_BIND", default_value = "127.0.0.1:8080")]
     pub bind: SocketAddr,
-    /// evaluator: auto (GPU when found, else CPU), gpu, cpu
+    /// evaluator: auto (a hardware GPU when found, else the f64 CPU), gpu (any adapter,
+    /// lavapipe included), cpu
     #[arg(long, env = "SUPERTOROID_BACKEND", value_enum, default_value = "auto")]
     pub backend: Backend,
     /// largest request body in bytes (413 beyond)

@@ -38,7 +38,10 @@ impl Bounds {
         let mut v = shape.to_array();
         for i in 0..6 {
             let margin = 0.01 * (self.upper[i] - self.lower[i]);
-            v[i] = v[i].clamp(self.lower[i] + margin, self.upper[i] - margin);
+            // near a small positive lower bound (sizes) keep the value: a thin section's
+            // a3 must not be pushed up to a margin of the whole range
+            let low_margin = margin.min((0.5 * self.lower[i]).max(1e-6));
+            v[i] = v[i].clamp(self.lower[i] + low_margin, self.upper[i] - margin);
         }
         Shape::from_array(v)
     }
