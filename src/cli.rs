@@ -93,6 +93,9 @@ pub struct BenchArgs {
     /// cases) into DIR, relative to --out unless absolute; the report embeds them
     #[arg(long, global = true)]
     pub render: Option<PathBuf>,
+    /// pipeline for the fits (paper, synthetic): default or paper
+    #[arg(long, global = true, value_enum, default_value = "default")]
+    pub method: crate::fit::Method,
 }
 
 #[derive(Subcommand, Debug)]
@@ -187,6 +190,9 @@ pub struct FitArgs {
     /// known hole axis x,y,z in the cloud's frame (e.g. 0,0,1 for "on a table, hole up")
     #[arg(long, allow_hyphen_values = true)]
     pub axis: Option<String>,
+    /// pipeline: default, or paper (the paper's procedure as a baseline; see the README)
+    #[arg(long, value_enum, default_value = "default")]
+    pub method: crate::fit::Method,
     /// known section half-height a3 in the cloud's units (held fixed): one view cannot
     /// tell how thick an object is
     #[arg(long)]
@@ -394,6 +400,7 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         stage2_points: args.stage2_points,
         known_axis,
         known_a3: args.a3,
+        method: args.method,
         ..Default::default()
     };
     let backend = args
@@ -504,7 +511,10 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         .backend
         .or_else(Backend::from_env)
         .unwrap_or(Backend::Auto);
-    let options = crate::fit::FitOptions::default();
+    let options = crate::fit::FitOptions {
+        method: args.method,
+        ..Default::default()
+    };
     let render = args
         .render
         .as_ref()

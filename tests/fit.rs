@@ -76,6 +76,31 @@ fn partial_clouds_regression_floor() {
         successes += e.success() as usize;
     }
     eprintln!("partial clouds recovered: {successes} of 12");
+    // the paper's procedure on the same cases, as the baseline the default must beat
+    let mut paper = 0;
+    for seed in (1..24u64).step_by(2) {
+        let noise = [0.0, 0.01, 0.02][(seed / 2 % 3) as usize];
+        let outliers = [0.0, 0.05, 0.1][(seed / 6 % 3) as usize];
+        let case = make_case(seed, true, noise, outliers);
+        let report = fit(
+            &mut evaluator,
+            &case.points,
+            &FitOptions {
+                seed,
+                method: supertoroid::fit::Method::Paper,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(report.method, supertoroid::fit::Method::Paper);
+        paper += compare(
+            (&case.shape, &case.pose),
+            (&report.fitted.0, &report.fitted.1),
+        )
+        .success() as usize;
+    }
+    eprintln!("paper method: {paper} of 12");
+    assert!(successes >= paper, "default {successes} < paper {paper}");
     assert!(
         successes >= 4,
         "only {successes} of 12 partial clouds recovered"

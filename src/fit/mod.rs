@@ -27,8 +27,35 @@ use std::time::Instant;
 /// Fewest points a fit accepts.
 pub const MIN_POINTS: usize = 20;
 
+/// Which pipeline runs.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+    utoipa::ToSchema,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// normal-line axis and PCA starts, Huber loss, pruning, a runner-up to stage 2
+    #[default]
+    Default,
+    /// the paper's procedure as a baseline: three starts along the cloud frame's x, y, z
+    /// at the centroid, a3 started at 0.6 of the bounding box half-diagonal, plain least
+    /// squares, the lowest stage-1 cost to stage 2. Stage 1 minimises the meridian
+    /// distance: the paper's top-view cost cannot be rebuilt from its text (the weights
+    /// are unpublished).
+    Paper,
+}
+
 #[derive(Clone, Debug)]
 pub struct FitOptions {
+    pub method: Method,
     pub seed: u64,
     pub stage1_points: usize,
     pub stage2_points: usize,
@@ -53,6 +80,7 @@ pub struct FitOptions {
 impl Default for FitOptions {
     fn default() -> Self {
         Self {
+            method: Method::Default,
             seed: 0,
             stage1_points: 150,
             stage2_points: 1000,
@@ -135,6 +163,7 @@ pub struct PointsOut {
 /// The result of `supertoroid fit` (and of the service), documented in the README.
 #[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct FitReport {
+    pub method: Method,
     pub shape: Shape,
     pub pose: PoseOut,
     pub quality: Quality,
@@ -234,7 +263,12 @@ pub fn fit(
     let stage1_pts = synth::subsample(&normalised, o.stage1_points, &mut rng);
     let stage2_pts = synth::subsample(&normalised, o.stage2_points, &mut rng);
     let bounds = Bounds::new(1e-3, 10.0, 8.0, o.eps_min, o.eps_max);
-    let loss = Loss::Huber(o.huber);
+    let paper = o.method == Method::Paper;
+    let loss = if paper {
+        Loss::Squared
+    } else {
+        Loss::Huber(o.huber)
+    };
 
     // Stage 1: batched multi-start.
     let axes_to_try: Vec<DVec3> = match o.known_axis {
@@ -255,7 +289,7 @@ pub fn fit(
             .map(|c| (d.normalize(), c)),
         None => starts::axis_from_normal_lines(&axis_sample, &normals),
     };
-    if let Some((axis, on_axis)) = line {
+    if let Some((axis, on_axis)) = line.filter(|_| !paper) {
         let hint = if axis.dot(axes.x_axis).abs() > 0.9 {
             axes.y_axis
         } else {
@@ -276,14 +310,38 @@ pub fn fit(
             }
         }
     }
-    for axis in &axes_to_try {
-        let hint = if axis.dot(axes.x_axis).abs() > 0.9 {
-            axes.y_axis
-        } else {
-            axes.x_axis
+    if paper {
+        // x, y, z of the cloud's frame, centroid, a3 = 0.6 of the half-diagonal
+        let (lo, hi) = stage1_pts
+            .iter()
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(*p), hi.max(*p))
+            });
+        let a3 = 0.6 * 0.5 * (hi - lo).length();
+        let axes_to_try = match o.known_axis {
+            Some(a) => vec![a.normalize()],
+            None => vec![DVec3::X, DVec3::Y, DVec3::Z],
         };
-        for a4 in [1.5, 3.0] {
-            starts.push(start_for_axis(&stage1_pts, *axis, hint, a4));
+        for axis in axes_to_try {
+            let hint = if axis.dot(DVec3::X).abs() > 0.9 {
+                DVec3::Y
+            } else {
+                DVec3::X
+            };
+            let mut start = start_for_axis(&stage1_pts, axis, hint, 1.5);
+            start.shape.a3 = a3;
+            starts.push(start);
+        }
+    } else {
+        for axis in &axes_to_try {
+            let hint = if axis.dot(axes.x_axis).abs() > 0.9 {
+                axes.y_axis
+            } else {
+                axes.x_axis
+            };
+            for a4 in [1.5, 3.0] {
+                starts.push(start_for_axis(&stage1_pts, *axis, hint, a4));
+            }
         }
     }
     evaluator.set_points(&stage1_pts)?;
@@ -291,7 +349,7 @@ pub fn fit(
         loss,
         max_iterations: 40,
         cost_tolerance: 1e-5,
-        prune_after: 4,
+        prune_after: if paper { 0 } else { 4 },
         prune_ratio: 1.5,
         // normalised units (the cloud's RMS radius is 1): stage 2 polishes
         step_tolerance: 1e-3,
@@ -323,7 +381,7 @@ pub fn fit(
     ranked.sort_by(|a, b| a.cost.total_cmp(&b.cost));
     let best = ranked[0];
     let mut finalists = vec![best.candidate];
-    if let Some(second) = ranked.iter().skip(1).find(|s| {
+    if let Some(second) = ranked.iter().skip(1).filter(|_| !paper).find(|s| {
         s.stop != crate::solve::Stop::Pruned
             && s.cost <= o.runner_up_ratio * best.cost
             && distinct_basin(&s.candidate.pose, &best.candidate.pose)
@@ -364,6 +422,7 @@ pub fn fit(
     let r = pose.matrix();
     let q = pose.rotation;
     Ok(FitReport {
+        method: o.method,
         shape,
         pose: PoseOut {
             translation: pose.translation.to_array(),

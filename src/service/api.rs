@@ -46,6 +46,8 @@ pub struct FitRequestOptions {
     pub axis: Option<[f64; 3]>,
     /// prior: the section half-height a3 in the cloud's units (held fixed)
     pub a3: Option<f64>,
+    /// pipeline: default, or paper (the paper's procedure, a baseline)
+    pub method: Option<crate::fit::Method>,
     /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
     pub format: Option<Format>,
 }
@@ -84,6 +86,7 @@ impl FitRequestOptions {
                 stage2_points: limit(self.stage2_points, defaults.stage2_points, "stage2_points")?,
                 known_axis,
                 known_a3: self.a3,
+                method: self.method.unwrap_or_default(),
                 ..defaults
             },
             backend: self.backend.unwrap_or(Backend::Auto),
