@@ -45,11 +45,9 @@ fn full_clouds_are_recovered_within_the_ground_truth_bounds() {
     );
 }
 
-/// Single-view partial clouds (odd seeds 1..23; noise 0/1/2% and outliers 0/5/10% by
-/// seed): a regression floor at the level measured when this was written, 4 of 12. The
-/// target of issue 4 is 95% on partial clouds with outliers; this is far from it.
-#[test]
-fn partial_clouds_regression_floor() {
+/// Successes on the single-view partial cases (odd seeds 1..23; noise 0/1/2% and
+/// outliers 0/5/10% by seed) with a method.
+fn partial_successes(method: supertoroid::fit::Method) -> usize {
     let mut evaluator = CpuEvaluator::new();
     let mut successes = 0;
     for seed in (1..24u64).step_by(2) {
@@ -61,50 +59,38 @@ fn partial_clouds_regression_floor() {
             &case.points,
             &FitOptions {
                 seed,
+                method,
                 ..Default::default()
             },
         )
         .unwrap();
+        assert_eq!(report.method, method);
         let e = compare(
             (&case.shape, &case.pose),
             (&report.fitted.0, &report.fitted.1),
         );
         eprintln!(
-            "partial case {seed}: noise {noise} outliers {outliers}: {e:?} -> {}",
+            "{method:?} partial case {seed}: noise {noise} outliers {outliers}: {e:?} -> {}",
             e.success()
         );
         successes += e.success() as usize;
     }
-    eprintln!("partial clouds recovered: {successes} of 12");
-    // the paper's procedure on the same cases, as the baseline the default must beat
-    let mut paper = 0;
-    for seed in (1..24u64).step_by(2) {
-        let noise = [0.0, 0.01, 0.02][(seed / 2 % 3) as usize];
-        let outliers = [0.0, 0.05, 0.1][(seed / 6 % 3) as usize];
-        let case = make_case(seed, true, noise, outliers);
-        let report = fit(
-            &mut evaluator,
-            &case.points,
-            &FitOptions {
-                seed,
-                method: supertoroid::fit::Method::Paper,
-                ..Default::default()
-            },
-        )
-        .unwrap();
-        assert_eq!(report.method, supertoroid::fit::Method::Paper);
-        paper += compare(
-            (&case.shape, &case.pose),
-            (&report.fitted.0, &report.fitted.1),
-        )
-        .success() as usize;
-    }
-    eprintln!("paper method: {paper} of 12");
-    assert!(successes >= paper, "default {successes} < paper {paper}");
+    successes
+}
+
+/// A regression floor at the level measured when this was written (4 of 12; 5 since the
+/// runner-up and bounds changes). The target of issue 4 is 95% on partial clouds with
+/// outliers; this is far from it. The paper's procedure is the baseline to beat.
+#[test]
+fn partial_clouds_regression_floor() {
+    let successes = partial_successes(supertoroid::fit::Method::Default);
+    let paper = partial_successes(supertoroid::fit::Method::Paper);
+    eprintln!("partial clouds recovered: {successes} of 12; paper method: {paper} of 12");
     assert!(
         successes >= 4,
         "only {successes} of 12 partial clouds recovered"
     );
+    assert!(successes >= paper, "default {successes} < paper {paper}");
 }
 
 #[test]

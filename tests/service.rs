@@ -63,13 +63,18 @@ impl Drop for Server {
     }
 }
 
-/// A fittable cloud as JSON points.
-fn planar_ok() -> Vec<[f64; 3]> {
-    supertoroid::fit::ground_truth::make_case(3, false, 0.0, 0.0)
+/// A ground-truth case's cloud as JSON points.
+fn case_points(seed: u64, partial: bool, noise: f64, outliers: f64) -> Vec<[f64; 3]> {
+    supertoroid::fit::ground_truth::make_case(seed, partial, noise, outliers)
         .points
         .iter()
         .map(|p| p.to_array())
         .collect()
+}
+
+/// A fittable cloud as JSON points.
+fn planar_ok() -> Vec<[f64; 3]> {
+    case_points(3, false, 0.0, 0.0)
 }
 
 fn cpu_config() -> ServiceConfig {
@@ -507,13 +512,7 @@ fn every_bad_input_class_gets_its_status_and_a_json_error() {
 fn batch_fits_every_cloud_and_reports_each_error() {
     let server = Server::start(cpu_config());
     let c = client();
-    let cloud = |seed: u64| -> Vec<[f64; 3]> {
-        supertoroid::fit::ground_truth::make_case(seed, false, 0.005, 0.0)
-            .points
-            .iter()
-            .map(|p| p.to_array())
-            .collect()
-    };
+    let cloud = |seed: u64| -> Vec<[f64; 3]> { case_points(seed, false, 0.005, 0.0) };
     let body = json!({"clouds": [
         {"points": cloud(1), "options": {"seed": 1}},
         {"points": [[0, 0, 0]]},
@@ -556,12 +555,7 @@ fn concurrent_requests_all_succeed_and_match_the_sequential_results() {
     }
     let bodies: Vec<Value> = (0..4u64)
         .map(|i| {
-            let points: Vec<[f64; 3]> =
-                supertoroid::fit::ground_truth::make_case(10 + i, i % 2 == 1, 0.01, 0.0)
-                    .points
-                    .iter()
-                    .map(|p| p.to_array())
-                    .collect();
+            let points: Vec<[f64; 3]> = case_points(10 + i, i % 2 == 1, 0.01, 0.0);
             json!({"points": points, "options": {"seed": i}})
         })
         .collect();
@@ -611,11 +605,7 @@ fn a_full_queue_answers_503_with_retry_after_and_then_recovers() {
         ..cpu_config()
     });
     let c = client();
-    let points: Vec<[f64; 3]> = supertoroid::fit::ground_truth::make_case(5, false, 0.01, 0.05)
-        .points
-        .iter()
-        .map(|p| p.to_array())
-        .collect();
+    let points: Vec<[f64; 3]> = case_points(5, false, 0.01, 0.05);
     // big stages make each fit slow enough for the others to find the worker busy
     let body = json!({"points": points, "options": {"stage1_points": 2000, "stage2_points": 2000}});
     let results: Vec<(u16, Option<String>, Value)> = std::thread::scope(|scope| {

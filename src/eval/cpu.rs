@@ -112,17 +112,21 @@ impl Evaluator for CpuEvaluator {
             .iter()
             .map(|c| {
                 let inverse = c.pose.rotation.inverse();
+                // per-chunk partial sums, added in chunk order (deterministic, as above)
                 let (cost, count) = self
                     .points
-                    .par_iter()
-                    .map(|p| {
-                        let r =
-                            meridian_distance(&c.shape, inverse * (*p - c.pose.translation)).signed;
-                        if r.is_finite() {
-                            (loss.eval(r).0, 1u64)
-                        } else {
-                            (0.0, 0)
-                        }
+                    .par_chunks(1024)
+                    .map(|chunk| {
+                        chunk.iter().fold((0.0, 0u64), |(cost, count), p| {
+                            let r =
+                                meridian_distance(&c.shape, inverse * (*p - c.pose.translation))
+                                    .signed;
+                            if r.is_finite() {
+                                (cost + loss.eval(r).0, count + 1)
+                            } else {
+                                (cost, count)
+                            }
+                        })
                     })
                     .collect::<Vec<_>>()
                     .into_iter()
