@@ -182,6 +182,24 @@ fn a_paper_cloud_as_pcd_and_as_json_gives_the_cli_result() {
     let from_cli: Value = serde_json::from_slice(&cli.stdout).unwrap();
     assert_same_fit(&from_pcd, &from_cli, "service vs CLI");
 
+    // options in the query for raw bodies, the axis prior as text
+    let prior: Value = post_pcd(
+        &c,
+        &server,
+        bytes.clone(),
+        "?seed=3&axis=0,0,1&method=paper",
+    )
+    .json()
+    .unwrap();
+    assert_eq!(prior["method"], "paper");
+    let z = prior["pose"]["rotation"][2][2].as_f64().unwrap();
+    assert!(
+        (z.abs() - 1.0).abs() < 1e-9,
+        "the hole axis is not the given one: {prior}"
+    );
+    let bad = post_pcd(&c, &server, bytes.clone(), "?axis=0,0");
+    assert_eq!(bad.status(), 422);
+
     // a different seed is a different downsampling
     let other: Value = post_pcd(&c, &server, bytes, "?seed=4").json().unwrap();
     assert_ne!(shape_of(&other), shape_of(&from_pcd));

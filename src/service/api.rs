@@ -42,7 +42,9 @@ pub struct FitRequestOptions {
     pub stage2_points: Option<usize>,
     /// prior: the hole axis [x, y, z] in the cloud's frame, e.g. [0, 0, 1] for "on a
     /// table, hole up" in a z-up frame
+    /// (in a query string: `axis=0,0,1`)
     #[param(value_type = Option<Vec<f64>>)]
+    #[serde(default, deserialize_with = "axis_from_array_or_text")]
     pub axis: Option<[f64; 3]>,
     /// prior: the section half-height a3 in the cloud's units (held fixed)
     pub a3: Option<f64>,
@@ -50,6 +52,25 @@ pub struct FitRequestOptions {
     pub method: Option<crate::fit::Method>,
     /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
     pub format: Option<Format>,
+}
+
+/// The axis as a JSON array `[x, y, z]` or as text `"x,y,z"` (query strings).
+fn axis_from_array_or_text<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> Result<Option<[f64; 3]>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Axis {
+        Array([f64; 3]),
+        Text(String),
+    }
+    match Option::<Axis>::deserialize(d)? {
+        None => Ok(None),
+        Some(Axis::Array(a)) => Ok(Some(a)),
+        Some(Axis::Text(t)) => crate::model::parse_floats::<3>(&t, "axis x,y,z")
+            .map(Some)
+            .map_err(serde::de::Error::custom),
+    }
 }
 
 impl FitRequestOptions {
