@@ -792,8 +792,9 @@ fn sigterm_lets_the_in_flight_fit_finish() {
     let response = std::thread::scope(|scope| {
         let request = scope.spawn(|| c.post(format!("{url}/v1/fit")).json(&body).send().unwrap());
         std::thread::sleep(std::time::Duration::from_millis(400));
-        let kill = Command::new("kill")
-            .args(["-TERM", &server.id().to_string()])
+        // the shell's own kill: no procps needed
+        let kill = Command::new("sh")
+            .args(["-c", &format!("kill -TERM {}", server.id())])
             .status()
             .unwrap();
         assert!(kill.success());
