@@ -458,6 +458,13 @@ fn write_file(
     std::fs::write(path, buf).map_err(|e| Failure::input(format!("{}: {e}", path.display())))
 }
 
+/// Shape and pose from the JSON `supertoroid fit` printed (`-` for stdin).
+fn read_fit_json(path: &std::path::Path) -> Result<(Shape, Pose), Failure> {
+    let bytes = crate::io::read_bytes(path).map_err(|e| Failure::input(e.to_string()))?;
+    crate::fit::parse_report_json(&bytes)
+        .map_err(|e| Failure::input(format!("{}: {e}", path.display())))
+}
+
 fn mesh(args: MeshArgs) -> Result<(), Failure> {
     let (shape, pose) = match (&args.shape, &args.fit) {
         (Some(shape), None) => ShapePoseArgs {
@@ -467,11 +474,7 @@ fn mesh(args: MeshArgs) -> Result<(), Failure> {
         }
         .parse()
         .map_err(Failure::input)?,
-        (None, Some(path)) => {
-            let bytes = crate::io::read_bytes(path).map_err(|e| Failure::input(e.to_string()))?;
-            crate::fit::parse_report_json(&bytes)
-                .map_err(|e| Failure::input(format!("{}: {e}", path.display())))?
-        }
+        (None, Some(path)) => read_fit_json(path)?,
         _ => return Err(Failure::input("give either --shape or --fit")),
     };
     if !(3..=4096).contains(&args.rings) || !(3..=4096).contains(&args.segments) {
@@ -566,11 +569,7 @@ fn render(args: RenderArgs) -> Result<(), Failure> {
     let fit = if args.no_fit {
         None
     } else if let Some(path) = &args.fit {
-        let bytes = crate::io::read_bytes(path).map_err(|e| Failure::input(e.to_string()))?;
-        Some(
-            crate::fit::parse_report_json(&bytes)
-                .map_err(|e| Failure::input(format!("{}: {e}", path.display())))?,
-        )
+        Some(read_fit_json(path)?)
     } else {
         let report = crate::fit::fit(
             &mut crate::eval::CpuEvaluator::new(),

@@ -379,18 +379,7 @@ fn render_rgba(ctx: &Arc<GpuContext>, scene: &Scene, size: u32) -> Result<Vec<u8
     );
     let submission = ctx.queue.submit(Some(encoder.finish()));
     let slice = readback.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::Wait {
-            submission_index: Some(submission),
-            timeout: Some(std::time::Duration::from_secs(60)),
-        })
-        .map_err(|e| e.to_string())?;
-    rx.recv()
-        .map_err(|e| e.to_string())?
+    ctx.map_for_reading(&slice, submission)
         .map_err(|e| e.to_string())?;
     let mut rgba = Vec::with_capacity((width * height * 4) as usize);
     {

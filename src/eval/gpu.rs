@@ -226,6 +226,26 @@ impl GpuContext {
         )
     }
 
+    /// Maps `slice` for reading once `submission` has finished (waits up to 60 s).
+    pub fn map_for_reading(
+        &self,
+        slice: &wgpu::BufferSlice,
+        submission: wgpu::SubmissionIndex,
+    ) -> Result<(), EvalError> {
+        let device = |e: &dyn std::fmt::Display| EvalError::Device(e.to_string());
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(submission),
+                timeout: Some(std::time::Duration::from_secs(60)),
+            })
+            .map_err(|e| device(&e))?;
+        rx.recv().map_err(|e| device(&e))?.map_err(|e| device(&e))
+    }
+
     pub fn is_software(&self) -> bool {
         self.info.device_type == wgpu::DeviceType::Cpu
     }
@@ -433,20 +453,7 @@ impl GpuEvaluator {
         encoder.copy_buffer_to_buffer(output, 0, staging, 0, bytes);
         let submission = self.ctx.queue.submit(Some(encoder.finish()));
         let slice = staging.slice(..bytes);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        self.ctx
-            .device
-            .poll(wgpu::PollType::Wait {
-                submission_index: Some(submission),
-                timeout: Some(std::time::Duration::from_secs(60)),
-            })
-            .map_err(|e| EvalError::Device(e.to_string()))?;
-        rx.recv()
-            .map_err(|e| EvalError::Device(e.to_string()))?
-            .map_err(|e| EvalError::Device(e.to_string()))?;
+        self.ctx.map_for_reading(&slice, submission)?;
         let values = {
             let view = slice
                 .get_mapped_range()
