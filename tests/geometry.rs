@@ -376,7 +376,13 @@ proptest! {
         let m = meridian_distance(&shape, DVec3::new(x, y, z));
         prop_assert!(m.distance.is_finite() && m.distance >= 0.0);
         prop_assert!(m.surface_point.is_finite());
-        let f = shape.inside_outside(m.surface_point);
-        prop_assert!((f - 1.0).abs() < 1e-8, "F_t(p_s) = {}", f);
+        // Apple shapes (a4 < 1): a ray that crosses the axis ends on the section curve's
+        // continuation beyond it, not on the implicit surface (see `model::distance`).
+        let dir = if x == 0.0 && y == 0.0 { (1.0, 0.0) } else { (x, y) };
+        let crosses_axis = m.surface_point.x * dir.0 + m.surface_point.y * dir.1 < 0.0;
+        if !(a4 < 1.0 && crosses_axis) {
+            let f = shape.inside_outside(m.surface_point);
+            prop_assert!((f - 1.0).abs() < 1e-8, "F_t(p_s) = {}", f);
+        }
     }
 }

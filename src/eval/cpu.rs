@@ -29,6 +29,37 @@ pub fn jacobian_row(c: &Candidate, rotation: &DMat3, p: DVec3) -> (f64, [f64; NU
     (g.residual, row)
 }
 
+/// Points per work item: small enough that a 1000-point stage-2 sample splits over
+/// cores, large enough that a work item outweighs rayon's scheduling.
+const CHUNK: usize = 256;
+
+impl CpuEvaluator {
+    fn chunks(&self) -> usize {
+        self.points.len().div_ceil(CHUNK)
+    }
+
+    /// `work(candidate, chunk)` over every (candidate, chunk) pair in parallel, so a
+    /// batch of small stage-1 samples spreads over cores as well as one large cloud.
+    /// Results come back in (candidate, chunk) order and are summed in that order by
+    /// the callers: the same sums whatever the thread schedule, so a seed always gives
+    /// the same fit.
+    fn per_chunk<T: Send>(
+        &self,
+        candidates: usize,
+        work: impl Fn(usize, &[DVec3]) -> T + Sync,
+    ) -> Vec<T> {
+        let chunks = self.chunks();
+        (0..candidates * chunks)
+            .into_par_iter()
+            .map(|item| {
+                let (k, j) = (item / chunks, item % chunks);
+                let end = ((j + 1) * CHUNK).min(self.points.len());
+                work(k, &self.points[j * CHUNK..end])
+            })
+            .collect()
+    }
+}
+
 impl Evaluator for CpuEvaluator {
     fn kind(&self) -> &'static str {
         "cpu"
@@ -51,55 +82,48 @@ impl Evaluator for CpuEvaluator {
         if self.points.is_empty() {
             return Err(EvalError::NoPoints);
         }
-        Ok(candidates
-            .iter()
-            .map(|c| {
-                let rotation = c.pose.matrix();
-                self.points
-                    .par_chunks(1024)
-                    .map(|chunk| {
-                        let mut ne = NormalEquations::zero();
-                        for p in chunk {
-                            let (r, row) = jacobian_row(c, &rotation, *p);
-                            if !r.is_finite() || row.iter().any(|x| !x.is_finite()) {
-                                continue;
-                            }
-                            let (rho, w) = loss.eval(r);
-                            for a in 0..NUM_PARAMS {
-                                let wa = w * row[a];
-                                for b in a..NUM_PARAMS {
-                                    ne.jtj[a][b] += wa * row[b];
-                                }
-                                ne.jtr[a] += wa * r;
-                            }
-                            ne.cost += rho;
-                            ne.count += 1;
+        let rotations: Vec<DMat3> = candidates.iter().map(|c| c.pose.matrix()).collect();
+        let partials = self.per_chunk(candidates.len(), |k, chunk| {
+            let (c, rotation) = (&candidates[k], &rotations[k]);
+            let mut ne = NormalEquations::zero();
+            for p in chunk {
+                let (r, row) = jacobian_row(c, rotation, *p);
+                if !r.is_finite() || row.iter().any(|x| !x.is_finite()) {
+                    continue;
+                }
+                let (rho, w) = loss.eval(r);
+                for a in 0..NUM_PARAMS {
+                    let wa = w * row[a];
+                    for b in a..NUM_PARAMS {
+                        ne.jtj[a][b] += wa * row[b];
+                    }
+                    ne.jtr[a] += wa * r;
+                }
+                ne.cost += rho;
+                ne.count += 1;
+            }
+            ne
+        });
+        Ok(partials
+            .chunks(self.chunks())
+            .map(|parts| {
+                let mut x = NormalEquations::zero();
+                for y in parts {
+                    for a in 0..NUM_PARAMS {
+                        for b in a..NUM_PARAMS {
+                            x.jtj[a][b] += y.jtj[a][b];
                         }
-                        ne
-                    })
-                    // collected and summed in chunk order: the same sum whatever the
-                    // thread schedule, so a seed always gives the same fit
-                    .collect::<Vec<_>>()
-                    .into_iter()
-                    .fold(NormalEquations::zero(), |mut x, y| {
-                        for a in 0..NUM_PARAMS {
-                            for b in a..NUM_PARAMS {
-                                x.jtj[a][b] += y.jtj[a][b];
-                            }
-                            x.jtr[a] += y.jtr[a];
-                        }
-                        x.cost += y.cost;
-                        x.count += y.count;
-                        x
-                    })
-            })
-            .map(|mut ne| {
+                        x.jtr[a] += y.jtr[a];
+                    }
+                    x.cost += y.cost;
+                    x.count += y.count;
+                }
                 for a in 0..NUM_PARAMS {
                     for b in 0..a {
-                        ne.jtj[a][b] = ne.jtj[b][a];
+                        x.jtj[a][b] = x.jtj[b][a];
                     }
                 }
-                ne
+                x
             })
             .collect())
     }
@@ -108,29 +132,25 @@ impl Evaluator for CpuEvaluator {
         if self.points.is_empty() {
             return Err(EvalError::NoPoints);
         }
-        Ok(candidates
+        let inverses: Vec<_> = candidates
             .iter()
-            .map(|c| {
-                let inverse = c.pose.rotation.inverse();
-                // per-chunk partial sums, added in chunk order (deterministic, as above)
-                let (cost, count) = self
-                    .points
-                    .par_chunks(1024)
-                    .map(|chunk| {
-                        chunk.iter().fold((0.0, 0u64), |(cost, count), p| {
-                            let r =
-                                meridian_distance(&c.shape, inverse * (*p - c.pose.translation))
-                                    .signed;
-                            if r.is_finite() {
-                                (cost + loss.eval(r).0, count + 1)
-                            } else {
-                                (cost, count)
-                            }
-                        })
-                    })
-                    .collect::<Vec<_>>()
-                    .into_iter()
-                    .fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+            .map(|c| c.pose.rotation.inverse())
+            .collect();
+        let partials = self.per_chunk(candidates.len(), |k, chunk| {
+            let c = &candidates[k];
+            chunk.iter().fold((0.0, 0u64), |(cost, count), p| {
+                let r = meridian_distance(&c.shape, inverses[k] * (*p - c.pose.translation)).signed;
+                if r.is_finite() {
+                    (cost + loss.eval(r).0, count + 1)
+                } else {
+                    (cost, count)
+                }
+            })
+        });
+        Ok(partials
+            .chunks(self.chunks())
+            .map(|parts| {
+                let (cost, count) = parts.iter().fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
                 Cost { cost, count }
             })
             .collect())

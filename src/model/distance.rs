@@ -67,12 +67,19 @@ fn signed_residual(shape: &Shape, m: &Meridian) -> (f64, f64, f64) {
     } else {
         (1.0, 0.0)
     };
-    let reach = (m.s * ux).hypot(shape.a3 * uz);
+    let reach = len2(m.s * ux, shape.a3 * uz);
     (m.l - reach, ux, uz)
 }
 
+/// sqrt(a^2 + b^2). libm's `hypot` guards against overflow at several times the cost;
+/// the evaluators work on normalised clouds (RMS radius 1), far from overflow.
+#[inline]
+fn len2(a: f64, b: f64) -> f64 {
+    (a * a + b * b).sqrt()
+}
+
 fn meridian(shape: &Shape, p: DVec3) -> Meridian {
-    let rho = p.x.hypot(p.y);
+    let rho = len2(p.x, p.y);
     let dir = if rho > 0.0 {
         [p.x / rho, p.y / rho]
     } else {
@@ -83,7 +90,7 @@ fn meridian(shape: &Shape, p: DVec3) -> Meridian {
     let big_x = g - shape.a4;
     let big_z = p.z / shape.a3;
     let n = superellipse_norm(big_x, big_z, shape.eps1);
-    let l = (s * big_x).hypot(p.z);
+    let l = len2(s * big_x, p.z);
     Meridian {
         dir,
         s,
@@ -176,26 +183,52 @@ pub struct ResidualGradient {
     pub d_shape: [f64; 6],
 }
 
-/// Partial derivatives of a superellipse norm M = (|u|^(2/e) + |v|^(2/e))^(e/2):
-/// (dM/du, dM/dv, dM/de). dM/du = sign(u)·(|u|/M)^(2/e - 1) stays bounded for e <= 2;
-/// dM/de = -(M/e)·sum_i w_i·ln(|u_i|/M) with weights w_i = (|u_i|/M)^(2/e).
-fn norm_partials(u: f64, v: f64, m: f64, e: f64) -> (f64, f64, f64) {
-    if m == 0.0 {
-        return (0.0, 0.0, 0.0);
+/// A superellipse norm M = (|u|^(2/e) + |v|^(2/e))^(e/2) with its partial derivatives
+/// (M, dM/du, dM/dv, dM/de), sharing one logarithm per component: with t_i = |u_i|/m
+/// (m the larger component, for range), p_i = t_i^(2/e), S = p_u + p_v, M = m·S^(e/2),
+/// weights w_i = p_i/S = (|u_i|/M)^(2/e):
+/// dM/du_i = sign(u_i)·w_i·M/|u_i| (bounded for e <= 2) and
+/// dM/de = -(M/e)·sum_i w_i·ln(|u_i|/M). Four transcendental calls instead of twelve.
+#[inline]
+fn norm_with_partials(u: f64, v: f64, e: f64) -> [f64; 4] {
+    let (au, av) = (u.abs(), v.abs());
+    let m = au.max(av);
+    if m == 0.0 || !m.is_finite() {
+        return [m, 0.0, 0.0, 0.0];
     }
     let k = 2.0 / e;
-    let part = |c: f64| {
-        let t = c.abs() / m;
-        if t == 0.0 {
-            (0.0, 0.0)
+    // ln t and t^k of one component; the larger one has t = 1
+    let part = |a: f64| {
+        if a == m {
+            (0.0, 1.0)
+        } else if a == 0.0 {
+            (f64::NEG_INFINITY, 0.0)
         } else {
-            let tk = t.powf(k);
-            (c.signum() * tk / t, tk * t.ln())
+            let ln_t = (a / m).ln();
+            (ln_t, (k * ln_t).exp())
         }
     };
-    let (du, lu) = part(u);
-    let (dv, lv) = part(v);
-    (du, dv, -(m / e) * (lu + lv))
+    let (ln_tu, pu) = part(au);
+    let (ln_tv, pv) = part(av);
+    let sum = pu + pv;
+    let ln_s = sum.ln();
+    let norm = m * (ln_s / k).exp();
+    let (wu, wv) = (pu / sum, pv / sum);
+    let d = |a: f64, c: f64, w: f64| {
+        if a == 0.0 {
+            0.0
+        } else {
+            c.signum() * w * norm / a
+        }
+    };
+    // ln(|u_i|/M) = ln t_i - ln(S)/k; a zero component has weight zero
+    let log_term = |w: f64, ln_t: f64| if w == 0.0 { 0.0 } else { w * (ln_t - ln_s / k) };
+    [
+        norm,
+        d(au, u, wu),
+        d(av, v, wv),
+        -(norm / e) * (log_term(wu, ln_tu) + log_term(wv, ln_tv)),
+    ]
 }
 
 /// Residual and gradient by the chain rule through r = L·(1 - 1/N),
@@ -203,15 +236,36 @@ fn norm_partials(u: f64, v: f64, m: f64, e: f64) -> (f64, f64, f64) {
 /// Not differentiable on the z axis and at section centres (see the module docs): there
 /// the derivatives returned are those of the guarded branch.
 pub fn meridian_residual_with_gradient(shape: &Shape, p: DVec3) -> ResidualGradient {
-    let m = meridian(shape, p);
     let Shape {
         a1,
         a2,
         a3,
+        a4,
         eps1,
         eps2,
-        ..
     } = *shape;
+    // G and N with their partials in one pass each (see `norm_with_partials`)
+    let rho = len2(p.x, p.y);
+    let (ux, vy) = (p.x / a1, p.y / a2);
+    let [g, g_u, g_v, g_e2] = norm_with_partials(ux, vy, eps2);
+    let (dir, s, g) = if rho > 0.0 && g > 0.0 {
+        ([p.x / rho, p.y / rho], rho / g, g)
+    } else {
+        // on the z axis: the x-z plane (see the module docs)
+        ([1.0, 0.0], a1, 0.0)
+    };
+    let big_x = g - a4;
+    let big_z = p.z / a3;
+    let [n, n_x, n_z, n_e1] = norm_with_partials(big_x, big_z, eps1);
+    let m = Meridian {
+        dir,
+        s,
+        g,
+        big_x,
+        big_z,
+        n,
+        l: len2(s * big_x, p.z),
+    };
     let residual = signed_residual(shape, &m).0;
     // At (within 1e-12 of) a section centre the ray direction is undefined: no gradient.
     if m.n < 1e-12 || m.l == 0.0 {
@@ -228,12 +282,9 @@ pub fn meridian_residual_with_gradient(shape: &Shape, p: DVec3) -> ResidualGradi
     let l_s = m.s * m.big_x * m.big_x / m.l;
     let l_x = m.s * m.s * m.big_x / m.l;
     let l_z = p.z / m.l;
-    // N(X, Z; eps1)
-    let (n_x, n_z, n_e1) = norm_partials(m.big_x, m.big_z, m.n, eps1);
     // G(x/a1, y/a2; eps2): derivatives with respect to its scaled arguments u = x/a1, v = y/a2.
-    let (ux, vy) = (p.x / a1, p.y / a2);
     let (g_u, g_v, g_e2) = if m.g > 0.0 {
-        norm_partials(ux, vy, m.g, eps2)
+        (g_u, g_v, g_e2)
     } else {
         (0.0, 0.0, 0.0)
     };

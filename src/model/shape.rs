@@ -166,8 +166,14 @@ pub fn superellipse_norm(u: f64, v: f64, eps: f64) -> f64 {
     if m == 0.0 || !m.is_finite() {
         return m;
     }
-    let e = 2.0 / eps;
-    m * ((u / m).powf(e) + (v / m).powf(e)).powf(eps / 2.0)
+    // the larger component contributes exactly 1; one ln/exp pair for the other
+    let t = u.min(v) / m;
+    let p = if t == 0.0 {
+        0.0
+    } else {
+        (2.0 / eps * t.ln()).exp()
+    };
+    m * ((1.0 + p).ln() * (eps / 2.0)).exp()
 }
 
 /// Point of the mean superellipse r_m(omega) (eq. 6).
