@@ -78,19 +78,24 @@ fn len2(a: f64, b: f64) -> f64 {
     (a * a + b * b).sqrt()
 }
 
-fn meridian(shape: &Shape, p: DVec3) -> Meridian {
+/// The meridian-plane quantities of a canonical point, given G(p) and a way to take the
+/// section norm N(X, Z) (plain, or with its partials captured by the gradient).
+fn meridian_with(
+    shape: &Shape,
+    p: DVec3,
+    g_of_p: f64,
+    section_norm: impl FnOnce(f64, f64) -> f64,
+) -> Meridian {
     let rho = len2(p.x, p.y);
-    let dir = if rho > 0.0 {
-        [p.x / rho, p.y / rho]
+    let (dir, s, g) = if rho > 0.0 && g_of_p > 0.0 {
+        ([p.x / rho, p.y / rho], rho / g_of_p, g_of_p)
     } else {
-        [1.0, 0.0]
+        // on the z axis: the x-z plane (see the module docs), s = 1/G(1, 0) = a1
+        ([1.0, 0.0], shape.a1, 0.0)
     };
-    let s = 1.0 / shape.top_view_norm(dir[0], dir[1]);
-    let g = rho / s;
     let big_x = g - shape.a4;
     let big_z = p.z / shape.a3;
-    let n = superellipse_norm(big_x, big_z, shape.eps1);
-    let l = len2(s * big_x, p.z);
+    let n = section_norm(big_x, big_z);
     Meridian {
         dir,
         s,
@@ -98,8 +103,14 @@ fn meridian(shape: &Shape, p: DVec3) -> Meridian {
         big_x,
         big_z,
         n,
-        l,
+        l: len2(s * big_x, p.z),
     }
+}
+
+fn meridian(shape: &Shape, p: DVec3) -> Meridian {
+    meridian_with(shape, p, shape.top_view_norm(p.x, p.y), |x, z| {
+        superellipse_norm(x, z, shape.eps1)
+    })
 }
 
 /// Closed-form meridian radial distance (see the module docs) of a point given in the
@@ -240,32 +251,19 @@ pub fn meridian_residual_with_gradient(shape: &Shape, p: DVec3) -> ResidualGradi
         a1,
         a2,
         a3,
-        a4,
         eps1,
         eps2,
+        ..
     } = *shape;
     // G and N with their partials in one pass each (see `norm_with_partials`)
-    let rho = len2(p.x, p.y);
     let (ux, vy) = (p.x / a1, p.y / a2);
     let [g, g_u, g_v, g_e2] = norm_with_partials(ux, vy, eps2);
-    let (dir, s, g) = if rho > 0.0 && g > 0.0 {
-        ([p.x / rho, p.y / rho], rho / g, g)
-    } else {
-        // on the z axis: the x-z plane (see the module docs)
-        ([1.0, 0.0], a1, 0.0)
-    };
-    let big_x = g - a4;
-    let big_z = p.z / a3;
-    let [n, n_x, n_z, n_e1] = norm_with_partials(big_x, big_z, eps1);
-    let m = Meridian {
-        dir,
-        s,
-        g,
-        big_x,
-        big_z,
-        n,
-        l: len2(s * big_x, p.z),
-    };
+    let mut section = [0.0; 4];
+    let m = meridian_with(shape, p, g, |x, z| {
+        section = norm_with_partials(x, z, eps1);
+        section[0]
+    });
+    let [_, n_x, n_z, n_e1] = section;
     let residual = signed_residual(shape, &m).0;
     // At (within 1e-12 of) a section centre the ray direction is undefined: no gradient.
     if m.n < 1e-12 || m.l == 0.0 {
