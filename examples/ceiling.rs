@@ -6,11 +6,11 @@
 //!
 //! `cargo run --release --example ceiling -- [CASES] [full|partial]`
 
-use supertoroid::bench::synthetic::category;
+use supertoroid::bench::synthetic::{DEFAULT_SEED, category};
 use supertoroid::eval::{CpuEvaluator, Evaluator, Loss, Normalization};
 use supertoroid::fit::ground_truth::{compare, make_case};
 use supertoroid::fit::{FitOptions, fit};
-use supertoroid::solve::{Bounds, SolverOptions, solve};
+use supertoroid::solve::{SolverOptions, solve};
 
 fn main() {
     let cases: usize = std::env::args()
@@ -26,8 +26,8 @@ fn main() {
         if only.is_some_and(|p| p != partial) {
             continue;
         }
-        // the seeds of `supertoroid bench synthetic` (default --seed 10000)
-        let seed = 10_000 + i as u64;
+        // the seeds of `supertoroid bench synthetic` with its default --seed
+        let seed = DEFAULT_SEED + i as u64;
         let case = make_case(seed, partial, noise, outliers);
         let report = fit(
             &mut evaluator,
@@ -46,13 +46,12 @@ fn main() {
         let norm = Normalization::of(&case.points);
         evaluator.set_points(&norm.points(&case.points)).unwrap();
         let start = norm.candidate(&case.shape, &case.pose);
-        let bounds = Bounds::new(1e-3, 10.0, 8.0, options.eps_min, options.eps_max);
         let solver = SolverOptions {
             loss: Loss::Huber(options.huber),
             max_iterations: 60,
             ..Default::default()
         };
-        let polished = solve(&mut evaluator, &[start], &bounds, &solver).unwrap();
+        let polished = solve(&mut evaluator, &[start], &options.bounds(), &solver).unwrap();
         let (shape, pose) = norm.to_world(&polished[0].candidate);
         let e_truth = compare((&case.shape, &case.pose), (&shape, &pose));
 

@@ -112,7 +112,7 @@ pub enum BenchCommand {
     Synthetic {
         #[arg(long, default_value_t = 180)]
         cases: usize,
-        #[arg(long, default_value_t = 10_000)]
+        #[arg(long, default_value_t = crate::bench::synthetic::DEFAULT_SEED)]
         seed: u64,
     },
     /// Time per solver iteration against points and candidates, per backend.

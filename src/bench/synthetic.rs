@@ -9,6 +9,9 @@ use crate::fit::ground_truth::{compare, make_case};
 use crate::fit::{FitOptions, fit};
 use serde::Serialize;
 
+/// The suite's first case seed (`bench synthetic --seed`): case i uses seed + i.
+pub const DEFAULT_SEED: u64 = 10_000;
+
 pub const NOISES: [f64; 3] = [0.0, 0.01, 0.02];
 pub const OUTLIERS: [f64; 3] = [0.0, 0.05, 0.10];
 

@@ -258,6 +258,14 @@ fn start_for_axis(points: &[DVec3], axis: DVec3, hint: DVec3, a4: f64) -> Candid
     }
 }
 
+impl FitOptions {
+    /// The solver's box in the normalised frame (the cloud's RMS radius is 1): sizes in
+    /// [1e-3, 10], a4 up to 8, eps in [eps_min, eps_max].
+    pub fn bounds(&self) -> Bounds {
+        Bounds::new(1e-3, 10.0, 8.0, self.eps_min, self.eps_max)
+    }
+}
+
 /// Fits one supertoroid to a cloud (world units in, world units out).
 pub fn fit(
     evaluator: &mut dyn Evaluator,
@@ -276,7 +284,7 @@ pub fn fit(
     let mut rng = synth::rng(o.seed);
     let stage1_pts = synth::subsample(&normalised, o.stage1_points, &mut rng);
     let stage2_pts = synth::subsample(&normalised, o.stage2_points, &mut rng);
-    let bounds = Bounds::new(1e-3, 10.0, 8.0, o.eps_min, o.eps_max);
+    let bounds = o.bounds();
     let paper = o.method == Method::Paper;
     let (a4_reward, hole_preference) = if paper {
         (PAPER_A4_REWARD, PAPER_A4_REWARD)
