@@ -1,10 +1,12 @@
 //! One whole fit (both stages, default options) of each paper cloud, on the CPU and GPU
-//! evaluators. `cargo bench --bench fit` (lavapipe is the GPU on a machine without one).
+//! evaluators; and the four clouds as one lockstep batch (`fit_batch`, what
+//! `/v1/fit/batch` runs) against the four fitted one after another.
+//! `cargo bench --bench fit` (lavapipe is the GPU on a machine without one).
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use std::time::Duration;
 use supertoroid::eval::*;
-use supertoroid::fit::{FitOptions, fit};
+use supertoroid::fit::{FitOptions, fit, fit_batch};
 
 fn bench_fit(c: &mut Criterion) {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/clouds/paper");
@@ -34,6 +36,29 @@ fn bench_fit(c: &mut Criterion) {
                 b.iter(|| fit(evaluator.as_mut(), points, &FitOptions::default()).unwrap())
             });
         }
+    }
+    group.finish();
+
+    let mut group = c.benchmark_group("batch of the four clouds");
+    group
+        .sample_size(20)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(4));
+    let options = FitOptions::default();
+    let batch: Vec<(&[glam::DVec3], &FitOptions)> =
+        clouds.iter().map(|(_, p)| (p.as_slice(), &options)).collect();
+    for evaluator in &mut evaluators {
+        let kind = evaluator.kind();
+        group.bench_function(BenchmarkId::new(kind, "one after another"), |b| {
+            b.iter(|| {
+                for (_, points) in &clouds {
+                    fit(evaluator.as_mut(), points, &options).unwrap();
+                }
+            })
+        });
+        group.bench_function(BenchmarkId::new(kind, "lockstep batch"), |b| {
+            b.iter(|| fit_batch(evaluator.as_mut(), &batch).unwrap())
+        });
     }
     group.finish();
 }

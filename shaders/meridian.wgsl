@@ -2,7 +2,9 @@
 // analytic derivatives, and per-candidate reduction to Gauss-Newton normal equations.
 //
 // One dispatch evaluates every (point, candidate) pair: workgroup (gx, k) handles a
-// grid-strided share of the points for candidate k. Points arrive centred and scaled by
+// grid-strided share of candidate k's points. Each candidate names its own range of the
+// point buffer, so a batch of clouds (several point sets uploaded together) is fitted in
+// the same dispatches as the starts of one cloud. Points arrive centred and scaled by
 // the host, so f32 keeps its precision. Powers are exp2(e·log2|x|) with guards: f64
 // transcendental functions are unreliable on lavapipe (wgpu issue 6087), and WGSL's pow
 // is undefined for x <= 0.
@@ -13,6 +15,7 @@
 // the canonical point q = R^T (p - t) moves by q x d.
 
 struct Params {
+    // the residual kernel's output stride per candidate (the largest point range)
     n_points: u32,
     n_candidates: u32,
     // 0 squared, 1 Huber, 2 Cauchy
@@ -33,8 +36,11 @@ struct Candidate {
     t: vec4<f32>,
     // a1 a2 a3 a4
     a: vec4<f32>,
-    // eps1 eps2 - -
-    e: vec4<f32>,
+    // eps1 eps2
+    e: vec2<f32>,
+    // the candidate's points: points[first .. first + count]
+    first: u32,
+    count: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -198,17 +204,20 @@ fn finite(x: f32) -> bool {
     return abs(x) <= 3.0e38;
 }
 
-// ---- residuals: out[k * n_points + i] = r_i(candidate k) ----------------------------
+// ---- residuals: out[k * n_points + i] = r_i(candidate k), i < count of k ------------
 
 @compute @workgroup_size(64)
 fn residuals(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x;
     let k = gid.y;
-    if (i >= params.n_points || k >= params.n_candidates) {
+    if (k >= params.n_candidates) {
         return;
     }
     let c = candidates[k];
-    let ev = meridian(canonical(c, points[i].xyz), c.a, c.e.xy, false);
+    if (i >= c.count) {
+        return;
+    }
+    let ev = meridian(canonical(c, points[c.first + i].xyz), c.a, c.e, false);
     out[k * params.n_points + i] = ev.r;
 }
 
@@ -228,13 +237,13 @@ fn normal_equations(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workg
         acc[j] = 0.0;
     }
     let stride = params.groups_x * WG;
-    for (var i = wid.x * WG + lid.x; i < params.n_points; i += stride) {
-        let p = points[i];
+    for (var i = wid.x * WG + lid.x; i < c.count; i += stride) {
+        let p = points[c.first + i];
         if (p.w == 0.0) {
             continue;
         }
         let q = canonical(c, p.xyz);
-        let ev = meridian(q, c.a, c.e.xy, true);
+        let ev = meridian(q, c.a, c.e, true);
         // translation: dq/dt = -R^T, so dr/dt = -R dr/dq; rotation increment: dr/dd = dr/dq x q
         let dt = -(c.c0.xyz * ev.dq.x + c.c1.xyz * ev.dq.y + c.c2.xyz * ev.dq.z);
         let dd = cross(ev.dq, q);
@@ -290,12 +299,12 @@ fn costs(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wi
     let c = candidates[k];
     var acc = vec2<f32>(0.0);
     let stride = params.groups_x * WG;
-    for (var i = wid.x * WG + lid.x; i < params.n_points; i += stride) {
-        let p = points[i];
+    for (var i = wid.x * WG + lid.x; i < c.count; i += stride) {
+        let p = points[c.first + i];
         if (p.w == 0.0) {
             continue;
         }
-        let ev = meridian(canonical(c, p.xyz), c.a, c.e.xy, false);
+        let ev = meridian(canonical(c, p.xyz), c.a, c.e, false);
         if (finite(ev.r)) {
             acc += vec2<f32>(loss_of(ev.r).x, 1.0);
         }

@@ -290,3 +290,80 @@ fn a_known_a3_resolves_a_one_sided_view() {
     );
     assert!(matches!(bad, Err(FitError::InvalidOption(_))));
 }
+
+/// A batch of clouds, fitted in lockstep: each cloud gets exactly the fit it gets alone
+/// (CPU evaluator, bit for bit), a bad cloud gets its own error without stopping the
+/// others, and clouds with other solver settings (the paper's method) still fit.
+#[test]
+fn a_batch_of_clouds_gives_each_cloud_its_own_fit() {
+    use supertoroid::fit::{Method, fit_batch};
+    let full = make_case(3, false, 0.01, 0.05).points;
+    let partial = make_case(4, true, 0.0, 0.0).points;
+    let outliers = make_case(5, false, 0.0, 0.1).points;
+    let few: Vec<DVec3> = (0..5).map(|i| DVec3::new(i as f64, 1.0, 2.0)).collect();
+    let a = FitOptions {
+        seed: 7,
+        ..Default::default()
+    };
+    let b = FitOptions {
+        seed: 8,
+        method: Method::Paper,
+        ..Default::default()
+    };
+    let c = FitOptions {
+        seed: 9,
+        ..Default::default()
+    };
+    let clouds: Vec<(&[DVec3], &FitOptions)> = vec![
+        (&full, &a),
+        (&few, &a),
+        (&partial, &b),
+        (&outliers, &c),
+        (&partial, &c),
+    ];
+    let batch = fit_batch(&mut CpuEvaluator::new(), &clouds).unwrap();
+    assert_eq!(batch.len(), clouds.len());
+    assert_eq!(
+        batch[1].as_ref().unwrap_err(),
+        &FitError::TooFewPoints(5)
+    );
+    for (i, (points, options)) in clouds.iter().enumerate() {
+        if i == 1 {
+            continue;
+        }
+        let alone = fit(&mut CpuEvaluator::new(), points, options).unwrap();
+        let together = batch[i].as_ref().unwrap();
+        assert_eq!(together.fitted, alone.fitted, "cloud {i}");
+        assert_eq!(together.method, options.method, "cloud {i}");
+        assert_eq!(together.iterations.stage2, alone.iterations.stage2, "cloud {i}");
+        assert_eq!(together.quality.rms_distance, alone.quality.rms_distance);
+    }
+}
+
+/// The same batch on the GPU evaluator (lavapipe in CI): one dispatch per solver
+/// iteration for all clouds, each fit as good as the CPU's.
+#[test]
+fn a_batch_of_clouds_fits_on_the_gpu() {
+    use supertoroid::fit::fit_batch;
+    let ctx =
+        GpuContext::shared(&AdapterChoice::from_env()).expect("a GPU adapter (lavapipe in CI)");
+    let cases: Vec<_> = (0..3).map(|i| make_case(100 + i, false, 0.005, 0.0)).collect();
+    let o = FitOptions::default();
+    let clouds: Vec<(&[DVec3], &FitOptions)> =
+        cases.iter().map(|c| (c.points.as_slice(), &o)).collect();
+    let gpu = fit_batch(&mut GpuEvaluator::new(ctx), &clouds).unwrap();
+    let cpu = fit_batch(&mut CpuEvaluator::new(), &clouds).unwrap();
+    for (i, case) in cases.iter().enumerate() {
+        let g = gpu[i].as_ref().unwrap();
+        let c = cpu[i].as_ref().unwrap();
+        assert_eq!(g.backend.kind, "gpu");
+        let e_gpu = compare((&case.shape, &case.pose), (&g.fitted.0, &g.fitted.1));
+        let e_cpu = compare((&case.shape, &case.pose), (&c.fitted.0, &c.fitted.1));
+        assert_eq!(e_gpu.success(), e_cpu.success(), "cloud {i}: {e_gpu:?} vs {e_cpu:?}");
+        assert!(
+            (g.quality.rms_distance - c.quality.rms_distance).abs()
+                < 0.2 * c.quality.rms_distance,
+            "cloud {i}"
+        );
+    }
+}

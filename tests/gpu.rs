@@ -337,3 +337,74 @@ fn padding_and_non_finite_points_are_not_counted() {
         Err(EvalError::NoPoints)
     ));
 }
+
+/// Several point sets in one upload, each candidate on its own: what a batch of clouds
+/// needs. The normal equations, costs and residuals of each candidate equal the f64
+/// reference on its set, and a set that was not uploaded is an error.
+#[test]
+fn candidates_on_different_point_sets_match_the_reference() {
+    let mut gpu = GpuEvaluator::new(context());
+    let mut cpu = CpuEvaluator::new();
+    let mut rng = synth::rng(31);
+    let shapes = [
+        Shape::new(0.8, 0.6, 0.4, 1.8, 0.7, 1.1),
+        Shape::new(0.5, 0.5, 0.2, 2.5, 1.2, 0.6),
+        Shape::new(0.9, 0.7, 0.5, 0.0, 1.0, 1.0),
+    ];
+    let poses: Vec<Pose> = shapes.iter().map(|_| random_pose(&mut rng)).collect();
+    let clouds: Vec<Vec<DVec3>> = [3000, 150, 1000]
+        .iter()
+        .zip(shapes.iter().zip(&poses))
+        .map(|(&n, (s, p))| synth::sample_surface(s, p, n, &mut rng))
+        .collect();
+    let sets: Vec<&[DVec3]> = clouds.iter().map(|c| c.as_slice()).collect();
+    gpu.set_point_sets(&sets).unwrap();
+    cpu.set_point_sets(&sets).unwrap();
+    // per set: the truth and a perturbed start; interleaved so no set is contiguous
+    let mut batch = Vec::new();
+    let mut which = Vec::new();
+    for round in 0..2 {
+        for (k, (s, p)) in shapes.iter().zip(&poses).enumerate() {
+            let shape = if round == 0 {
+                *s
+            } else {
+                Shape { a1: s.a1 * 1.1, eps1: s.eps1 * 0.9, ..*s }
+            };
+            batch.push(Candidate { shape, pose: *p });
+            which.push(k);
+        }
+    }
+    let loss = Loss::Huber(0.05);
+    let g = gpu.normal_equations_on(&batch, &which, loss).unwrap();
+    let c = cpu.normal_equations_on(&batch, &which, loss).unwrap();
+    for (k, (a, b)) in g.iter().zip(&c).enumerate() {
+        assert_eq!(b.count as usize, clouds[which[k]].len(), "candidate {k}");
+        if k >= 3 {
+            // the truth has cost ~0, where f32 and f64 differ in relative terms
+            compare_normal_equations(a, b, 2e-3);
+        } else {
+            assert_eq!(a.count, b.count);
+        }
+    }
+    let gc = gpu.costs_on(&batch, &which, loss).unwrap();
+    let cc = cpu.costs_on(&batch, &which, loss).unwrap();
+    for (k, (a, b)) in gc.iter().zip(&cc).enumerate() {
+        assert_eq!(a.count, b.count, "candidate {k}");
+        assert!((a.cost - b.cost).abs() <= 2e-3 * b.cost.max(1e-6), "candidate {k}");
+    }
+    let gr = gpu.residuals_on(&batch, &which).unwrap();
+    let cr = cpu.residuals_on(&batch, &which).unwrap();
+    let expected: usize = which.iter().map(|&k| clouds[k].len()).sum();
+    assert_eq!(gr.len(), expected);
+    assert_eq!(cr.len(), expected);
+    let far = gr.iter().zip(&cr).filter(|(a, b)| (*a - *b).abs() > 1e-3).count();
+    assert!(far * 100 < expected, "{far} of {expected} residuals differ");
+    assert!(matches!(
+        gpu.costs_on(&batch[..1], &[3], loss),
+        Err(EvalError::BadSet(_))
+    ));
+    assert!(matches!(
+        cpu.costs_on(&batch[..1], &[3], loss),
+        Err(EvalError::BadSet(_))
+    ));
+}

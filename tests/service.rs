@@ -531,32 +531,73 @@ fn batch_fits_every_cloud_and_reports_each_error() {
     let server = Server::start(cpu_config());
     let c = client();
     let cloud = |seed: u64| -> Vec<[f64; 3]> { case_points(seed, false, 0.005, 0.0) };
-    let body = json!({"clouds": [
-        {"points": cloud(1), "options": {"seed": 1}},
-        {"points": [[0, 0, 0]]},
-        {"points": cloud(2)}
-    ]});
+    let singles = [
+        json!({"points": cloud(1), "options": {"seed": 1}}),
+        json!({"points": [[0, 0, 0]]}),
+        json!({"points": cloud(2)}),
+        json!({"points": case_points(6, true, 0.0, 0.0), "options": {"seed": 3, "method": "paper"}}),
+    ];
     let v: Value = c
         .post(server.url("/v1/fit/batch"))
-        .json(&body)
+        .json(&json!({ "clouds": singles }))
         .send()
         .unwrap()
         .json()
         .unwrap();
     let results = v["results"].as_array().unwrap();
-    assert_eq!(results.len(), 3);
-    assert!(results[0]["fit"]["shape"].is_object());
+    assert_eq!(results.len(), 4);
     assert_eq!(results[1]["error"]["code"], "too_few_points");
-    assert!(results[2]["fit"]["shape"].is_object());
-    // the same cloud alone gives the same fit
-    let single: Value = c
-        .post(server.url("/v1/fit"))
-        .json(&json!({"points": cloud(1), "options": {"seed": 1}}))
+    assert_eq!(results[3]["fit"]["method"], "paper");
+    // each cloud alone gives the same fit (the lockstep batch is exact on the CPU)
+    for i in [0, 2, 3] {
+        assert!(results[i]["fit"]["shape"].is_object());
+        let single: Value = c
+            .post(server.url("/v1/fit"))
+            .json(&singles[i])
+            .send()
+            .unwrap()
+            .json()
+            .unwrap();
+        assert_same_fit(&results[i]["fit"], &single, &format!("batch vs single, cloud {i}"));
+    }
+}
+
+/// On a GPU service (lavapipe in CI) a batch runs on the device, all clouds in the same
+/// dispatches, each fitted as well as alone.
+#[test]
+fn a_batch_fits_on_the_gpu_as_well_as_single_requests() {
+    let server = Server::start(ServiceConfig {
+        backend: Backend::Gpu,
+        ..Default::default()
+    });
+    let c = client();
+    let clouds: Vec<Value> = (0..3)
+        .map(|i| json!({"points": case_points(100 + i, false, 0.005, 0.0), "options": {"seed": i}}))
+        .collect();
+    let v: Value = c
+        .post(server.url("/v1/fit/batch"))
+        .json(&json!({ "clouds": clouds }))
         .send()
         .unwrap()
         .json()
         .unwrap();
-    assert_same_fit(&results[0]["fit"], &single, "batch vs single");
+    let results = v["results"].as_array().unwrap();
+    for (i, cloud) in clouds.iter().enumerate() {
+        let fit = &results[i]["fit"];
+        assert_eq!(fit["backend"]["kind"], "gpu", "{v}");
+        let single: Value = c
+            .post(server.url("/v1/fit"))
+            .json(cloud)
+            .send()
+            .unwrap()
+            .json()
+            .unwrap();
+        let (a, b) = (shape_of(fit), shape_of(&single));
+        // f32 partial sums are added in another order in a batch: close, not identical
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() <= 0.02 * y.abs().max(0.1), "cloud {i}: {a:?} vs {b:?}");
+        }
+    }
 }
 
 #[test]

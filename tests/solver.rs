@@ -26,12 +26,13 @@ impl Evaluator for Mock {
     fn device_name(&self) -> String {
         "mock".into()
     }
-    fn set_points(&mut self, _: &[DVec3]) -> Result<(), EvalError> {
+    fn set_point_sets(&mut self, _: &[&[DVec3]]) -> Result<(), EvalError> {
         Ok(())
     }
-    fn normal_equations(
+    fn normal_equations_on(
         &mut self,
         cs: &[Candidate],
+        _: &[usize],
         loss: Loss,
     ) -> Result<Vec<NormalEquations>, EvalError> {
         self.seen.extend_from_slice(cs);
@@ -55,7 +56,12 @@ impl Evaluator for Mock {
             })
             .collect())
     }
-    fn costs(&mut self, cs: &[Candidate], loss: Loss) -> Result<Vec<Cost>, EvalError> {
+    fn costs_on(
+        &mut self,
+        cs: &[Candidate],
+        _: &[usize],
+        loss: Loss,
+    ) -> Result<Vec<Cost>, EvalError> {
         Ok(cs
             .iter()
             .map(|c| {
@@ -67,7 +73,7 @@ impl Evaluator for Mock {
             })
             .collect())
     }
-    fn residuals(&mut self, cs: &[Candidate]) -> Result<Vec<f64>, EvalError> {
+    fn residuals_on(&mut self, cs: &[Candidate], _: &[usize]) -> Result<Vec<f64>, EvalError> {
         Ok(cs
             .iter()
             .flat_map(|c| (self.residuals)(&theta(c)).0)

@@ -1,4 +1,4 @@
-use super::{Candidate, Cost, EvalError, Evaluator, Loss, NUM_PARAMS, NormalEquations};
+use super::{Candidate, Cost, EvalError, Evaluator, Loss, NUM_PARAMS, NormalEquations, check_sets};
 use crate::model::{meridian_distance, meridian_residual_with_gradient};
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -6,7 +6,10 @@ use rayon::prelude::*;
 /// The f64 reference evaluator, parallel over points with rayon.
 #[derive(Default)]
 pub struct CpuEvaluator {
+    /// all point sets, one after another
     points: Vec<DVec3>,
+    /// (first, count) of each set in `points`
+    sets: Vec<(usize, usize)>,
 }
 
 impl CpuEvaluator {
@@ -34,29 +37,47 @@ pub fn jacobian_row(c: &Candidate, rotation: &DMat3, p: DVec3) -> (f64, [f64; NU
 const CHUNK: usize = 256;
 
 impl CpuEvaluator {
-    fn chunks(&self) -> usize {
-        self.points.len().div_ceil(CHUNK)
+    /// The points of set `s`.
+    fn set(&self, s: usize) -> &[DVec3] {
+        let (first, count) = self.sets[s];
+        &self.points[first..first + count]
     }
 
-    /// `work(candidate, chunk)` over every (candidate, chunk) pair in parallel, so a
-    /// batch of small stage-1 samples spreads over cores as well as one large cloud.
-    /// Results come back in (candidate, chunk) order and are summed in that order by
-    /// the callers: the same sums whatever the thread schedule, so a seed always gives
-    /// the same fit.
+    /// `work(candidate, chunk)` over every (candidate, chunk of its set) pair in
+    /// parallel, so a batch of small stage-1 samples spreads over cores as well as one
+    /// large cloud. Returns, per candidate, its chunks' results in chunk order; the
+    /// callers sum them in that order: the same sums whatever the thread schedule or the
+    /// other candidates of the batch, so a seed always gives the same fit, alone or in a
+    /// batch of clouds.
     fn per_chunk<T: Send>(
         &self,
-        candidates: usize,
+        sets: &[usize],
         work: impl Fn(usize, &[DVec3]) -> T + Sync,
-    ) -> Vec<T> {
-        let chunks = self.chunks();
-        (0..candidates * chunks)
+    ) -> Vec<Vec<T>> {
+        let items: Vec<(usize, usize)> = sets
+            .iter()
+            .enumerate()
+            .flat_map(|(k, &s)| (0..self.sets[s].1.div_ceil(CHUNK)).map(move |j| (k, j)))
+            .collect();
+        let mut results: Vec<(usize, T)> = items
             .into_par_iter()
-            .map(|item| {
-                let (k, j) = (item / chunks, item % chunks);
-                let end = ((j + 1) * CHUNK).min(self.points.len());
-                work(k, &self.points[j * CHUNK..end])
+            .map(|(k, j)| {
+                let set = self.set(sets[k]);
+                let end = ((j + 1) * CHUNK).min(set.len());
+                (k, work(k, &set[j * CHUNK..end]))
             })
-            .collect()
+            .collect();
+        let mut out: Vec<Vec<T>> = (0..sets.len()).map(|_| Vec::new()).collect();
+        // `collect` keeps the items' order: candidate by candidate, chunk by chunk
+        for (k, t) in results.drain(..) {
+            out[k].push(t);
+        }
+        out
+    }
+
+    fn check(&self, candidates: usize, sets: &[usize]) -> Result<(), EvalError> {
+        let sizes: Vec<usize> = self.sets.iter().map(|s| s.1).collect();
+        check_sets(candidates, sets, &sizes)
     }
 }
 
@@ -69,21 +90,25 @@ impl Evaluator for CpuEvaluator {
         format!("cpu (f64, {} threads)", rayon::current_num_threads())
     }
 
-    fn set_points(&mut self, points: &[DVec3]) -> Result<(), EvalError> {
-        self.points = points.to_vec();
+    fn set_point_sets(&mut self, sets: &[&[DVec3]]) -> Result<(), EvalError> {
+        self.points.clear();
+        self.sets.clear();
+        for set in sets {
+            self.sets.push((self.points.len(), set.len()));
+            self.points.extend_from_slice(set);
+        }
         Ok(())
     }
 
-    fn normal_equations(
+    fn normal_equations_on(
         &mut self,
         candidates: &[Candidate],
+        sets: &[usize],
         loss: Loss,
     ) -> Result<Vec<NormalEquations>, EvalError> {
-        if self.points.is_empty() {
-            return Err(EvalError::NoPoints);
-        }
+        self.check(candidates.len(), sets)?;
         let rotations: Vec<DMat3> = candidates.iter().map(|c| c.pose.matrix()).collect();
-        let partials = self.per_chunk(candidates.len(), |k, chunk| {
+        let partials = self.per_chunk(sets, |k, chunk| {
             let (c, rotation) = (&candidates[k], &rotations[k]);
             let mut ne = NormalEquations::zero();
             for p in chunk {
@@ -105,7 +130,7 @@ impl Evaluator for CpuEvaluator {
             ne
         });
         Ok(partials
-            .chunks(self.chunks())
+            .iter()
             .map(|parts| {
                 let mut x = NormalEquations::zero();
                 for y in parts {
@@ -128,15 +153,18 @@ impl Evaluator for CpuEvaluator {
             .collect())
     }
 
-    fn costs(&mut self, candidates: &[Candidate], loss: Loss) -> Result<Vec<Cost>, EvalError> {
-        if self.points.is_empty() {
-            return Err(EvalError::NoPoints);
-        }
+    fn costs_on(
+        &mut self,
+        candidates: &[Candidate],
+        sets: &[usize],
+        loss: Loss,
+    ) -> Result<Vec<Cost>, EvalError> {
+        self.check(candidates.len(), sets)?;
         let inverses: Vec<_> = candidates
             .iter()
             .map(|c| c.pose.rotation.inverse())
             .collect();
-        let partials = self.per_chunk(candidates.len(), |k, chunk| {
+        let partials = self.per_chunk(sets, |k, chunk| {
             let c = &candidates[k];
             chunk.iter().fold((0.0, 0u64), |(cost, count), p| {
                 let r = meridian_distance(&c.shape, inverses[k] * (*p - c.pose.translation)).signed;
@@ -148,7 +176,7 @@ impl Evaluator for CpuEvaluator {
             })
         });
         Ok(partials
-            .chunks(self.chunks())
+            .iter()
             .map(|parts| {
                 let (cost, count) = parts.iter().fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
                 Cost { cost, count }
@@ -156,15 +184,17 @@ impl Evaluator for CpuEvaluator {
             .collect())
     }
 
-    fn residuals(&mut self, candidates: &[Candidate]) -> Result<Vec<f64>, EvalError> {
-        if self.points.is_empty() {
-            return Err(EvalError::NoPoints);
-        }
-        let mut out = Vec::with_capacity(candidates.len() * self.points.len());
-        for c in candidates {
+    fn residuals_on(
+        &mut self,
+        candidates: &[Candidate],
+        sets: &[usize],
+    ) -> Result<Vec<f64>, EvalError> {
+        self.check(candidates.len(), sets)?;
+        let mut out = Vec::new();
+        for (c, &s) in candidates.iter().zip(sets) {
             let inverse = c.pose.rotation.inverse();
             out.par_extend(
-                self.points.par_iter().map(|p| {
+                self.set(s).par_iter().map(|p| {
                     meridian_distance(&c.shape, inverse * (*p - c.pose.translation)).signed
                 }),
             );

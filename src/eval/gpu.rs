@@ -3,7 +3,9 @@
 //! evaluators that keep their storage and staging buffers across iterations, growing
 //! them only when a larger cloud or batch arrives.
 
-use super::{Candidate, Cost, EvalError, Evaluator, Loss, NUM_PARAMS, NUM_UPPER, NormalEquations};
+use super::{
+    Candidate, Cost, EvalError, Evaluator, Loss, NUM_PARAMS, NUM_UPPER, NormalEquations, check_sets,
+};
 use glam::DVec3;
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -74,11 +76,13 @@ struct GpuCandidate {
     columns: [[f32; 4]; 3],
     translation: [f32; 4],
     sizes: [f32; 4],
-    exponents: [f32; 4],
+    exponents: [f32; 2],
+    /// first point and number of points of the candidate's set
+    range: [u32; 2],
 }
 
 impl GpuCandidate {
-    fn from(c: &Candidate) -> Self {
+    fn from(c: &Candidate, range: (u32, u32)) -> Self {
         let r = c.pose.matrix();
         let col = |v: glam::DVec3| [v.x as f32, v.y as f32, v.z as f32, 0.0];
         let s = c.shape;
@@ -86,7 +90,8 @@ impl GpuCandidate {
             columns: [col(r.x_axis), col(r.y_axis), col(r.z_axis)],
             translation: col(c.pose.translation),
             sizes: [s.a1 as f32, s.a2 as f32, s.a3 as f32, s.a4 as f32],
-            exponents: [s.eps1 as f32, s.eps2 as f32, 0.0, 0.0],
+            exponents: [s.eps1 as f32, s.eps2 as f32],
+            range: [range.0, range.1],
         }
     }
 }
@@ -289,7 +294,8 @@ fn ensure(
 /// The WGSL evaluator. Holds its own buffers; shares the process's [`GpuContext`].
 pub struct GpuEvaluator {
     ctx: Arc<GpuContext>,
-    n_points: u32,
+    /// (first, count) of each uploaded point set in the points buffer
+    sets: Vec<(u32, u32)>,
     params: wgpu::Buffer,
     points: Option<Grown>,
     candidates: Option<Grown>,
@@ -310,7 +316,7 @@ impl GpuEvaluator {
         });
         Self {
             ctx,
-            n_points: 0,
+            sets: Vec::new(),
             params,
             points: None,
             candidates: None,
@@ -325,19 +331,26 @@ impl GpuEvaluator {
         &self.ctx
     }
 
-    /// Workgroups along x per candidate: enough to fill the device, few enough that the
-    /// partial sums read back stay small (at most ~1.5 MB for a whole batch).
-    fn groups_x(&self, n_candidates: usize) -> u32 {
-        let target_total: usize = if self.ctx.is_software() { 16 } else { 4096 };
-        let needed = (self.n_points as usize).div_ceil(WG as usize).max(1);
-        let short_enough =
-            (self.n_points as usize).div_ceil(WG as usize * MAX_POINTS_PER_INVOCATION);
+    /// Workgroups along x per candidate, for candidates of at most `n_points` points:
+    /// enough to fill the device, few enough that the partial sums read back stay small
+    /// (at most ~1.5 MB for a whole batch).
+    fn groups_x(n_points: usize, n_candidates: usize, software: bool) -> u32 {
+        let target_total: usize = if software { 16 } else { 4096 };
+        let needed = n_points.div_ceil(WG as usize).max(1);
+        let short_enough = n_points.div_ceil(WG as usize * MAX_POINTS_PER_INVOCATION);
         (target_total / n_candidates.max(1))
             .max(short_enough)
             .clamp(1, needed) as u32
     }
 
-    fn upload_candidates(&mut self, candidates: &[Candidate]) -> Result<(), EvalError> {
+    /// Uploads the candidates with their sets' ranges; returns the largest range.
+    fn upload_candidates(
+        &mut self,
+        candidates: &[Candidate],
+        sets: &[usize],
+    ) -> Result<usize, EvalError> {
+        let sizes: Vec<usize> = self.sets.iter().map(|s| s.1 as usize).collect();
+        check_sets(candidates.len(), sets, &sizes)?;
         let max_y = self.ctx.limits.max_compute_workgroups_per_dimension as usize;
         if candidates.is_empty() || candidates.len() > max_y {
             return Err(EvalError::TooLarge(format!(
@@ -346,8 +359,12 @@ impl GpuEvaluator {
             )));
         }
         self.scratch.clear();
-        self.scratch
-            .extend(candidates.iter().map(GpuCandidate::from));
+        self.scratch.extend(
+            candidates
+                .iter()
+                .zip(sets)
+                .map(|(c, &s)| GpuCandidate::from(c, self.sets[s])),
+        );
         let bytes = std::mem::size_of_val(self.scratch.as_slice()) as u64;
         if ensure(
             &self.ctx,
@@ -363,7 +380,7 @@ impl GpuEvaluator {
             0,
             bytemuck::cast_slice(&self.scratch),
         );
-        Ok(())
+        Ok(sets.iter().map(|&s| sizes[s]).max().unwrap_or(0))
     }
 
     fn prepare_output(&mut self, bytes: u64) -> Result<(), EvalError> {
@@ -472,17 +489,17 @@ impl GpuEvaluator {
         pipeline: Pipeline,
         stride: usize,
         candidates: &[Candidate],
+        sets: &[usize],
         loss: Loss,
     ) -> Result<Vec<Vec<f64>>, EvalError> {
-        self.require_points()?;
-        self.upload_candidates(candidates)?;
+        let longest = self.upload_candidates(candidates, sets)?;
         let k = candidates.len();
-        let groups_x = self.groups_x(k);
+        let groups_x = Self::groups_x(longest, k, self.ctx.is_software());
         let values = k * groups_x as usize * stride;
         self.prepare_output((values * 4) as u64)?;
         let (code, scale) = loss.code();
         let params = Params {
-            n_points: self.n_points,
+            n_points: longest as u32,
             n_candidates: k as u32,
             loss: code,
             groups_x,
@@ -505,13 +522,6 @@ impl GpuEvaluator {
             .collect())
     }
 
-    fn require_points(&self) -> Result<(), EvalError> {
-        if self.n_points == 0 {
-            Err(EvalError::NoPoints)
-        } else {
-            Ok(())
-        }
-    }
 }
 
 /// Every partial ends in the marker 1.0 that its workgroup writes last.
@@ -541,15 +551,17 @@ impl Evaluator for GpuEvaluator {
         self.ctx.adapter_name()
     }
 
-    fn set_points(&mut self, points: &[DVec3]) -> Result<(), EvalError> {
-        let bytes = (points.len() * 16) as u64;
+    fn set_point_sets(&mut self, sets: &[&[DVec3]]) -> Result<(), EvalError> {
+        let total: usize = sets.iter().map(|s| s.len()).sum();
+        let bytes = (total * 16) as u64;
         if bytes > self.ctx.limits.max_storage_buffer_binding_size as u64
-            || points.len() > u32::MAX as usize / 2
+            || total > u32::MAX as usize / 2
         {
-            return Err(EvalError::TooLarge(format!("{} points", points.len())));
+            return Err(EvalError::TooLarge(format!("{total} points")));
         }
-        let data: Vec<[f32; 4]> = points
+        let data: Vec<[f32; 4]> = sets
             .iter()
+            .flat_map(|set| set.iter())
             .map(|p| [p.x as f32, p.y as f32, p.z as f32, 1.0])
             .collect();
         if ensure(
@@ -568,24 +580,35 @@ impl Evaluator for GpuEvaluator {
                 bytemuck::cast_slice(&data),
             );
         }
-        self.n_points = points.len() as u32;
+        self.sets.clear();
+        let mut first = 0u32;
+        for set in sets {
+            self.sets.push((first, set.len() as u32));
+            first += set.len() as u32;
+        }
         Ok(())
     }
 
-    fn normal_equations(
+    fn normal_equations_on(
         &mut self,
         candidates: &[Candidate],
+        sets: &[usize],
         loss: Loss,
     ) -> Result<Vec<NormalEquations>, EvalError> {
-        let sums = self.reduce(Pipeline::NormalEquations, NE_OUT, candidates, loss)?;
+        let sums = self.reduce(Pipeline::NormalEquations, NE_OUT, candidates, sets, loss)?;
         Ok(sums
             .iter()
             .map(|s| NormalEquations::from_packed(s))
             .collect())
     }
 
-    fn costs(&mut self, candidates: &[Candidate], loss: Loss) -> Result<Vec<Cost>, EvalError> {
-        let sums = self.reduce(Pipeline::Costs, COST_OUT, candidates, loss)?;
+    fn costs_on(
+        &mut self,
+        candidates: &[Candidate],
+        sets: &[usize],
+        loss: Loss,
+    ) -> Result<Vec<Cost>, EvalError> {
+        let sums = self.reduce(Pipeline::Costs, COST_OUT, candidates, sets, loss)?;
         Ok(sums
             .iter()
             .map(|s| Cost {
@@ -595,31 +618,35 @@ impl Evaluator for GpuEvaluator {
             .collect())
     }
 
-    fn residuals(&mut self, candidates: &[Candidate]) -> Result<Vec<f64>, EvalError> {
-        self.require_points()?;
-        self.upload_candidates(candidates)?;
+    fn residuals_on(
+        &mut self,
+        candidates: &[Candidate],
+        sets: &[usize],
+    ) -> Result<Vec<f64>, EvalError> {
+        let longest = self.upload_candidates(candidates, sets)?;
         let k = candidates.len();
-        let values = k * self.n_points as usize;
+        let values = k * longest;
         self.prepare_output((values * 4) as u64)?;
         let params = Params {
-            n_points: self.n_points,
+            n_points: longest as u32,
             n_candidates: k as u32,
             loss: 0,
             groups_x: 0,
             loss_scale: 1.0,
             _pad: [0.0; 3],
         };
-        let groups = (self.n_points.div_ceil(WG_RESIDUALS), k as u32);
+        let groups = ((longest as u32).div_ceil(WG_RESIDUALS), k as u32);
         if groups.0 > self.ctx.limits.max_compute_workgroups_per_dimension {
             return Err(EvalError::TooLarge(format!(
-                "{} points for one residual dispatch",
-                self.n_points
+                "{longest} points for one residual dispatch"
             )));
         }
-        Ok(self
-            .run(Pipeline::Residuals, params, groups, values)?
-            .into_iter()
-            .map(f64::from)
+        // blocks of `longest` values per candidate, of which its set's count are written
+        let out = self.run(Pipeline::Residuals, params, groups, values)?;
+        Ok(out
+            .chunks(longest.max(1))
+            .zip(sets)
+            .flat_map(|(block, &s)| block[..self.sets[s].1 as usize].iter().map(|&v| f64::from(v)))
             .collect())
     }
 }

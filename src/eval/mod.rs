@@ -130,24 +130,86 @@ pub enum EvalError {
     Device(String),
     #[error("input too large for the device: {0}")]
     TooLarge(String),
+    #[error("bad point-set index: {0}")]
+    BadSet(String),
 }
 
 /// The evaluator interface the solver talks to.
+///
+/// Points are uploaded as one or more *point sets* (a batch of clouds, or one cloud's
+/// stage sample); every candidate is evaluated on the set it names, so the starts of many
+/// clouds go through the same batched call (one dispatch on the GPU). The `_on` methods
+/// take one set index per candidate; the plain ones evaluate every candidate on set 0.
 pub trait Evaluator: Send {
     /// "cpu" or "gpu"
     fn kind(&self) -> &'static str;
     /// Human-readable device name (the adapter's name for the GPU).
     fn device_name(&self) -> String;
-    /// Uploads the (normalised) points once; they stay for all following evaluations.
-    fn set_points(&mut self, points: &[DVec3]) -> Result<(), EvalError>;
+    /// Uploads the (normalised) point sets once; they stay for all following evaluations.
+    fn set_point_sets(&mut self, sets: &[&[DVec3]]) -> Result<(), EvalError>;
+    /// Normal equations of every candidate on its point set (`sets[k]` for candidate k).
+    fn normal_equations_on(
+        &mut self,
+        candidates: &[Candidate],
+        sets: &[usize],
+        loss: Loss,
+    ) -> Result<Vec<NormalEquations>, EvalError>;
+    fn costs_on(
+        &mut self,
+        candidates: &[Candidate],
+        sets: &[usize],
+        loss: Loss,
+    ) -> Result<Vec<Cost>, EvalError>;
+    /// Signed residuals, one block per candidate of one value per point of its set.
+    fn residuals_on(
+        &mut self,
+        candidates: &[Candidate],
+        sets: &[usize],
+    ) -> Result<Vec<f64>, EvalError>;
+
+    /// One point set.
+    fn set_points(&mut self, points: &[DVec3]) -> Result<(), EvalError> {
+        self.set_point_sets(&[points])
+    }
     fn normal_equations(
         &mut self,
         candidates: &[Candidate],
         loss: Loss,
-    ) -> Result<Vec<NormalEquations>, EvalError>;
-    fn costs(&mut self, candidates: &[Candidate], loss: Loss) -> Result<Vec<Cost>, EvalError>;
-    /// Signed residuals, `candidates.len()` blocks of one value per point.
-    fn residuals(&mut self, candidates: &[Candidate]) -> Result<Vec<f64>, EvalError>;
+    ) -> Result<Vec<NormalEquations>, EvalError> {
+        self.normal_equations_on(candidates, &vec![0; candidates.len()], loss)
+    }
+    fn costs(&mut self, candidates: &[Candidate], loss: Loss) -> Result<Vec<Cost>, EvalError> {
+        self.costs_on(candidates, &vec![0; candidates.len()], loss)
+    }
+    /// Signed residuals on set 0, `candidates.len()` blocks of one value per point.
+    fn residuals(&mut self, candidates: &[Candidate]) -> Result<Vec<f64>, EvalError> {
+        self.residuals_on(candidates, &vec![0; candidates.len()])
+    }
+}
+
+/// Checks one set index per candidate against the sizes of the uploaded sets: every named
+/// set must exist and hold points.
+pub(crate) fn check_sets(candidates: usize, sets: &[usize], sizes: &[usize]) -> Result<(), EvalError> {
+    if sets.len() != candidates {
+        return Err(EvalError::BadSet(format!(
+            "{} set indices for {candidates} candidates",
+            sets.len()
+        )));
+    }
+    for &s in sets {
+        match sizes.get(s) {
+            None if sizes.is_empty() => return Err(EvalError::NoPoints),
+            None => {
+                return Err(EvalError::BadSet(format!(
+                    "set {s} named, {} uploaded",
+                    sizes.len()
+                )));
+            }
+            Some(0) => return Err(EvalError::NoPoints),
+            Some(_) => {}
+        }
+    }
+    Ok(())
 }
 
 /// Centre and scale that map world points into the evaluators' frame: p' = (p - c)/s.

@@ -19,7 +19,7 @@ pub mod starts;
 
 use crate::eval::{Candidate, EvalError, Evaluator, Loss, Normalization};
 use crate::model::{Pose, Shape, meridian_distance};
-use crate::solve::{Bounds, SolverOptions, solve};
+use crate::solve::{Bounds, Solution, SolverOptions, Stop, solve_on};
 use crate::synth;
 use glam::{DMat3, DQuat, DVec3};
 use serde::Serialize;
@@ -110,7 +110,7 @@ impl Default for FitOptions {
     }
 }
 
-#[derive(Debug, thiserror::Error, PartialEq)]
+#[derive(Clone, Debug, thiserror::Error, PartialEq)]
 pub enum FitError {
     #[error("too few points: {0} (at least {MIN_POINTS} needed)")]
     TooFewPoints(usize),
@@ -272,7 +272,76 @@ pub fn fit(
     points: &[DVec3],
     o: &FitOptions,
 ) -> Result<FitReport, FitError> {
+    fit_batch(evaluator, &[(points, o)])?
+        .pop()
+        .expect("one result per cloud")
+}
+
+/// Fits many clouds together: the stage-1 starts of every cloud are solved in lockstep,
+/// one batched evaluator call per solver iteration for all of them (one dispatch on the
+/// GPU), then the stage-2 finalists of every cloud likewise. Clouds whose options give
+/// different solver settings (method, priors, loss) go in separate lockstep groups.
+///
+/// Each cloud gets the fit [`fit`] gives it alone (bit for bit on the CPU evaluator);
+/// its `timing_ms` is its group's, since the clouds share every evaluation. The outer
+/// error is the evaluator's (it fails the whole batch); a cloud that cannot be fitted
+/// (too few points, planar, bad options) gets its own error and the others go on.
+pub fn fit_batch(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
     let start = Instant::now();
+    let mut results: Vec<Option<Result<FitReport, FitError>>> = (0..clouds.len()).map(|_| None).collect();
+    let mut prepared: Vec<(usize, Prepared)> = Vec::new();
+    for (i, (points, o)) in clouds.iter().enumerate() {
+        match prepare(points, o) {
+            Ok(p) => prepared.push((i, p)),
+            Err(e) => results[i] = Some(Err(e)),
+        }
+    }
+    // lockstep groups: clouds with the same solver settings for both stages
+    let mut groups: Vec<Vec<(usize, Prepared)>> = Vec::new();
+    for (i, p) in prepared {
+        match groups
+            .iter_mut()
+            .find(|g| {
+                let q = &g[0].1;
+                (q.bounds, q.opts1, q.opts2) == (p.bounds, p.opts1, p.opts2)
+            })
+        {
+            Some(g) => g.push((i, p)),
+            None => groups.push(vec![(i, p)]),
+        }
+    }
+    for group in groups {
+        let reports = fit_group(evaluator, &group, start)?;
+        for ((i, _), report) in group.iter().zip(reports) {
+            results[*i] = Some(Ok(report));
+        }
+    }
+    Ok(results
+        .into_iter()
+        .map(|r| r.expect("every cloud prepared or failed"))
+        .collect())
+}
+
+/// One cloud, checked, normalised, sampled, with its stage-1 starts and solver settings.
+struct Prepared<'a> {
+    points: &'a [DVec3],
+    method: Method,
+    norm: Normalization,
+    stage1_pts: Vec<DVec3>,
+    stage2_pts: Vec<DVec3>,
+    starts: Vec<Candidate>,
+    bounds: Bounds,
+    opts1: SolverOptions,
+    opts2: SolverOptions,
+    /// a stage-1 runner-up in another basin within this cost ratio goes on to stage 2
+    runner_up_ratio: Option<f64>,
+    hole_preference: f64,
+}
+
+fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitError> {
     if o.stage1_points < MIN_POINTS || o.stage2_points < MIN_POINTS {
         return Err(FitError::InvalidOption(format!(
             "points per stage must be at least {MIN_POINTS}"
@@ -371,7 +440,6 @@ pub fn fit(
             }
         }
     }
-    evaluator.set_points(&stage1_pts)?;
     let mut opts1 = SolverOptions {
         loss,
         max_iterations: 40,
@@ -399,27 +467,7 @@ pub fn fit(
         }
         opts1.fixed[2] = true;
     }
-    let stage1 = solve(evaluator, &starts, &bounds, &opts1)?;
-    // The best start, and the runner-up when it is a different hole axis with a cost
-    // not far above: on a 150-point sample the two can swap places, and stage 2 on 1000
-    // points tells them apart (measured on the paper's pot: the runner-up fitted the
-    // points with half the RMS distance in 2 of 10 seeds).
-    let mut ranked: Vec<&crate::solve::Solution> = stage1.iter().collect();
-    ranked.sort_by(|a, b| a.cost.total_cmp(&b.cost));
-    let best = ranked[0];
-    let mut finalists = vec![best.candidate];
-    if let Some(second) = ranked.iter().skip(1).filter(|_| !paper).find(|s| {
-        s.stop != crate::solve::Stop::Pruned
-            && s.cost <= o.runner_up_ratio * best.cost
-            && distinct_basin(&s.candidate.pose, &best.candidate.pose)
-    }) {
-        finalists.push(second.candidate);
-    }
-    let stage1_iterations = stage1.iter().map(|s| s.iterations).max().unwrap_or(0);
-    let t1 = start.elapsed();
 
-    // Stage 2: refine on more points (with the a4 reward, when asked for).
-    evaluator.set_points(&stage2_pts)?;
     let opts2 = SolverOptions {
         loss,
         shape_prior: [0.0, 0.0, o.a3_penalty, -a4_reward, 0.0, 0.0],
@@ -433,23 +481,126 @@ pub fn fit(
         max_iterations: 30,
         ..Default::default()
     };
-    let stage2 = solve(evaluator, &finalists, &bounds, &opts2)?
-        .into_iter()
-        .min_by(|a, b| {
-            let merit = |s: &crate::solve::Solution| {
-                s.cost - hole_preference * s.candidate.shape.a4 * s.count as f64
-            };
-            merit(a).total_cmp(&merit(b))
-        })
-        .expect("one finalist at least");
+    Ok(Prepared {
+        points,
+        method: o.method,
+        norm,
+        stage1_pts,
+        stage2_pts,
+        starts,
+        bounds,
+        opts1,
+        opts2,
+        runner_up_ratio: (!paper).then_some(o.runner_up_ratio),
+        hole_preference,
+    })
+}
+
+/// Both stages for a group of prepared clouds with the same solver settings.
+fn fit_group(
+    evaluator: &mut dyn Evaluator,
+    group: &[(usize, Prepared)],
+    start: Instant,
+) -> Result<Vec<FitReport>, FitError> {
+    let (opts1, opts2) = (group[0].1.opts1, group[0].1.opts2);
+    let bounds = group[0].1.bounds;
+    // Stage 1: every start of every cloud, on its cloud's 150-point sample.
+    let samples: Vec<&[DVec3]> = group.iter().map(|(_, p)| p.stage1_pts.as_slice()).collect();
+    evaluator.set_point_sets(&samples)?;
+    let (starts, sets) = flatten(group.iter().map(|(_, p)| p.starts.clone()));
+    let stage1 = solve_on(evaluator, &starts, &sets, &bounds, &opts1)?;
+    let mut finalists = Vec::new();
+    let mut stage1_iterations = Vec::new();
+    for (cloud, (_, p)) in group.iter().enumerate() {
+        let solutions: Vec<&Solution> = stage1
+            .iter()
+            .zip(&sets)
+            .filter(|(_, s)| **s == cloud)
+            .map(|(sol, _)| sol)
+            .collect();
+        stage1_iterations.push(solutions.iter().map(|s| s.iterations).max().unwrap_or(0));
+        finalists.push(stage1_finalists(&solutions, p.runner_up_ratio));
+    }
+    let t1 = start.elapsed();
+
+    // Stage 2: the finalists of every cloud, on its cloud's 1000-point sample.
+    let samples: Vec<&[DVec3]> = group.iter().map(|(_, p)| p.stage2_pts.as_slice()).collect();
+    evaluator.set_point_sets(&samples)?;
+    let (candidates, sets) = flatten(finalists.into_iter());
+    let stage2 = solve_on(evaluator, &candidates, &sets, &bounds, &opts2)?;
     let t_total = start.elapsed();
 
-    let (shape, pose) = norm.to_world(&stage2.candidate);
-    let quality = quality(&shape, &pose, points);
+    let timing = Timing {
+        stage1: t1.as_secs_f64() * 1e3,
+        stage2: (t_total - t1).as_secs_f64() * 1e3,
+        total: t_total.as_secs_f64() * 1e3,
+    };
+    Ok(group
+        .iter()
+        .enumerate()
+        .map(|(cloud, (_, p))| {
+            // between finalists, the lower cost wins, a wider hole breaking near-ties
+            let merit = |s: &Solution| {
+                s.cost - p.hole_preference * s.candidate.shape.a4 * s.count as f64
+            };
+            let best = stage2
+                .iter()
+                .zip(&sets)
+                .filter(|(_, s)| **s == cloud)
+                .map(|(sol, _)| sol)
+                .min_by(|a, b| merit(a).total_cmp(&merit(b)))
+                .expect("one finalist at least");
+            report(p, best, timing.clone(), stage1_iterations[cloud], evaluator)
+        })
+        .collect())
+}
+
+/// Concatenates per-cloud candidate lists, with the cloud index of each candidate.
+fn flatten(lists: impl Iterator<Item = Vec<Candidate>>) -> (Vec<Candidate>, Vec<usize>) {
+    let mut all = Vec::new();
+    let mut sets = Vec::new();
+    for (cloud, list) in lists.enumerate() {
+        sets.extend(std::iter::repeat_n(cloud, list.len()));
+        all.extend(list);
+    }
+    (all, sets)
+}
+
+/// The best stage-1 solution, and the runner-up when it is a different hole axis or
+/// in-plane turn with a cost not far above: on a 150-point sample the two can swap
+/// places, and stage 2 on 1000 points tells them apart (measured on the paper's pot: the
+/// runner-up fitted the points with half the RMS distance in 2 of 10 seeds).
+fn stage1_finalists(solutions: &[&Solution], runner_up_ratio: Option<f64>) -> Vec<Candidate> {
+    let mut ranked: Vec<&Solution> = solutions.to_vec();
+    ranked.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+    let best = ranked[0];
+    let mut finalists = vec![best.candidate];
+    if let Some(ratio) = runner_up_ratio
+        && let Some(second) = ranked.iter().skip(1).find(|s| {
+            s.stop != Stop::Pruned
+                && s.cost <= ratio * best.cost
+                && distinct_basin(&s.candidate.pose, &best.candidate.pose)
+        })
+    {
+        finalists.push(second.candidate);
+    }
+    finalists
+}
+
+/// The report of one cloud's chosen solution, in world units.
+fn report(
+    p: &Prepared,
+    solution: &Solution,
+    timing_ms: Timing,
+    stage1_iterations: usize,
+    evaluator: &dyn Evaluator,
+) -> FitReport {
+    let (shape, pose) = p.norm.to_world(&solution.candidate);
+    let quality = quality(&shape, &pose, p.points);
     let r = pose.matrix();
     let q = pose.rotation;
-    Ok(FitReport {
-        method: o.method,
+    FitReport {
+        method: p.method,
         shape,
         pose: PoseOut {
             translation: pose.translation.to_array(),
@@ -461,26 +612,22 @@ pub fn fit(
             quaternion_wxyz: [q.w, q.x, q.y, q.z],
         },
         quality,
-        timing_ms: Timing {
-            stage1: t1.as_secs_f64() * 1e3,
-            stage2: (t_total - t1).as_secs_f64() * 1e3,
-            total: t_total.as_secs_f64() * 1e3,
-        },
+        timing_ms,
         iterations: Iterations {
             stage1: stage1_iterations,
-            stage2: stage2.iterations,
+            stage2: solution.iterations,
         },
         backend: BackendOut {
             kind: evaluator.kind().into(),
             adapter: evaluator.device_name(),
         },
         points: PointsOut {
-            input: points.len(),
-            stage1: stage1_pts.len(),
-            stage2: stage2_pts.len(),
+            input: p.points.len(),
+            stage1: p.stage1_pts.len(),
+            stage2: p.stage2_pts.len(),
         },
         fitted: (shape, pose),
-    })
+    }
 }
 
 /// Two poses in different basins of the fit: hole axes more than 10 degrees apart, or

@@ -13,7 +13,7 @@
 use super::config::ServiceConfig;
 use super::error::ApiError;
 use crate::eval::{AdapterChoice, Backend, CpuEvaluator, Evaluator, GpuContext, GpuEvaluator};
-use crate::fit::{FitError, FitOptions, FitReport, fit};
+use crate::fit::{FitOptions, FitReport, fit_batch};
 use axum::http::StatusCode;
 use glam::DVec3;
 use serde::Serialize;
@@ -114,8 +114,8 @@ impl Fitter {
         self.waiting.load(Ordering::Relaxed)
     }
 
-    /// Runs the jobs (one request's clouds) on one worker, in order; each result is the
-    /// fit or the reason it failed. Err is for the request as a whole: queue full,
+    /// Runs the jobs (one request's clouds) on one worker, fitted together (one lockstep
+    /// batch per evaluator); each result is the fit or the reason it failed. Err is for the request as a whole: queue full,
     /// timeout, or the GPU asked for and not available.
     pub async fn run(
         &self,
@@ -149,9 +149,7 @@ impl Fitter {
             let serial = self.worker_count > 1;
             tokio::task::spawn_blocking(move || {
                 let _permits = (admission, worker);
-                jobs.into_iter()
-                    .map(|job| run_one(job, gpu.as_ref(), &degraded, serial))
-                    .collect::<Vec<_>>()
+                run_jobs(jobs, gpu.as_ref(), &degraded, serial)
             })
             .await
             .map_err(|e| {
@@ -181,45 +179,76 @@ thread_local! {
         rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
 }
 
-/// One fit on the requested evaluator; a GPU failure marks the service degraded and the
-/// fit is redone on the CPU.
-fn run_one(
-    job: FitJob,
+/// One request's clouds on the requested evaluators; a GPU failure marks the service
+/// degraded and the clouds are redone on the CPU.
+fn run_jobs(
+    jobs: Vec<FitJob>,
     gpu: Option<&Arc<GpuContext>>,
     degraded: &Mutex<Option<String>>,
     serial: bool,
-) -> Result<FitReport, ApiError> {
+) -> Vec<Result<FitReport, ApiError>> {
     if serial {
         SERIAL.with(|pool| match pool {
-            Some(pool) => pool.install(|| run_one_here(job, gpu, degraded)),
-            None => run_one_here(job, gpu, degraded),
+            Some(pool) => pool.install(|| run_jobs_here(&jobs, gpu, degraded)),
+            None => run_jobs_here(&jobs, gpu, degraded),
         })
     } else {
-        run_one_here(job, gpu, degraded)
+        run_jobs_here(&jobs, gpu, degraded)
     }
 }
 
-fn run_one_here(
-    job: FitJob,
+/// The clouds that may use the GPU are fitted together in one lockstep batch on it
+/// (`fit::fit_batch`: every solver iteration of every cloud in one dispatch), the rest
+/// together on the CPU.
+fn run_jobs_here(
+    jobs: &[FitJob],
     gpu: Option<&Arc<GpuContext>>,
     degraded: &Mutex<Option<String>>,
-) -> Result<FitReport, ApiError> {
-    let use_gpu = job.backend != Backend::Cpu && gpu.is_some();
-    if use_gpu {
-        let mut evaluator = GpuEvaluator::new(gpu.unwrap().clone());
-        match fit(
-            &mut evaluator as &mut dyn Evaluator,
-            &job.points,
-            &job.options,
-        ) {
-            Err(FitError::Evaluator(e)) => {
+) -> Vec<Result<FitReport, ApiError>> {
+    let mut results: Vec<Option<Result<FitReport, ApiError>>> = jobs.iter().map(|_| None).collect();
+    let (on_gpu, on_cpu): (Vec<usize>, Vec<usize>) =
+        (0..jobs.len()).partition(|&i| jobs[i].backend != Backend::Cpu && gpu.is_some());
+    let clouds = |indices: &[usize]| -> Vec<(&[DVec3], &FitOptions)> {
+        indices
+            .iter()
+            .map(|&i| (jobs[i].points.as_slice(), &jobs[i].options))
+            .collect()
+    };
+    let mut for_cpu = on_cpu;
+    if let (Some(ctx), false) = (gpu, on_gpu.is_empty()) {
+        let mut evaluator = GpuEvaluator::new(ctx.clone());
+        match fit_batch(&mut evaluator as &mut dyn Evaluator, &clouds(&on_gpu)) {
+            Ok(fits) => {
+                for (&i, r) in on_gpu.iter().zip(fits) {
+                    results[i] = Some(r.map_err(ApiError::from));
+                }
+            }
+            Err(e) => {
                 tracing::error!(error = %e, "GPU evaluator failed; switching to the CPU");
                 if let Ok(mut d) = degraded.lock() {
                     *d = Some(format!("GPU evaluator failed: {e}"));
                 }
+                for_cpu.extend(on_gpu);
+                for_cpu.sort_unstable();
             }
-            other => return other.map_err(ApiError::from),
         }
     }
-    fit(&mut CpuEvaluator::new(), &job.points, &job.options).map_err(ApiError::from)
+    if !for_cpu.is_empty() {
+        match fit_batch(&mut CpuEvaluator::new(), &clouds(&for_cpu)) {
+            Ok(fits) => {
+                for (&i, r) in for_cpu.iter().zip(fits) {
+                    results[i] = Some(r.map_err(ApiError::from));
+                }
+            }
+            Err(e) => {
+                for &i in &for_cpu {
+                    results[i] = Some(Err(ApiError::from(e.clone())));
+                }
+            }
+        }
+    }
+    results
+        .into_iter()
+        .map(|r| r.expect("every job ran"))
+        .collect()
 }

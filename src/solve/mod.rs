@@ -170,14 +170,37 @@ pub fn apply_step(c: &Candidate, step: &[f64; NUM_PARAMS]) -> Candidate {
     }
 }
 
-/// Solves from every start (batched through the evaluator) and returns one solution per start.
+/// Solves from every start (batched through the evaluator, all on point set 0) and
+/// returns one solution per start.
 pub fn solve(
     evaluator: &mut dyn Evaluator,
     starts: &[Candidate],
     bounds: &Bounds,
     o: &SolverOptions,
 ) -> Result<Vec<Solution>, EvalError> {
-    let first = evaluator.costs(
+    solve_on(evaluator, starts, &vec![0; starts.len()], bounds, o)
+}
+
+/// Solves from every start, start k on the evaluator's point set `sets[k]`: the starts of
+/// several clouds in lockstep, one batched evaluator call per iteration for all of them.
+/// Starts never interact except through pruning, which compares a start only with the
+/// best start of its own set; so each cloud's solutions are the ones `solve` gives it
+/// alone (bit for bit on the CPU evaluator).
+pub fn solve_on(
+    evaluator: &mut dyn Evaluator,
+    starts: &[Candidate],
+    sets: &[usize],
+    bounds: &Bounds,
+    o: &SolverOptions,
+) -> Result<Vec<Solution>, EvalError> {
+    if sets.len() != starts.len() {
+        return Err(EvalError::BadSet(format!(
+            "{} set indices for {} starts",
+            sets.len(),
+            starts.len()
+        )));
+    }
+    let first = evaluator.costs_on(
         &starts
             .iter()
             .map(|s| Candidate {
@@ -185,6 +208,7 @@ pub fn solve(
                 ..*s
             })
             .collect::<Vec<_>>(),
+        sets,
         o.loss,
     )?;
     let mut states: Vec<State> = starts
@@ -222,9 +246,13 @@ pub fn solve(
 
     for iteration in 0..o.max_iterations {
         if o.prune_after > 0 && iteration == o.prune_after && states.len() > 1 {
-            let best = states.iter().map(|s| s.cost).fold(f64::INFINITY, f64::min);
-            for s in states.iter_mut() {
-                if s.stop.is_none() && s.cost > o.prune_ratio * best {
+            let mut best = std::collections::HashMap::<usize, f64>::new();
+            for (s, &set) in states.iter().zip(sets) {
+                let b = best.entry(set).or_insert(f64::INFINITY);
+                *b = b.min(s.cost);
+            }
+            for (s, set) in states.iter_mut().zip(sets) {
+                if s.stop.is_none() && s.cost > o.prune_ratio * best[set] {
                     s.stop = Some(Stop::Pruned);
                 }
             }
@@ -236,7 +264,8 @@ pub fn solve(
             break;
         }
         let cands: Vec<Candidate> = active.iter().map(|&i| states[i].c).collect();
-        let normal = evaluator.normal_equations(&cands, o.loss)?;
+        let active_sets: Vec<usize> = active.iter().map(|&i| sets[i]).collect();
+        let normal = evaluator.normal_equations_on(&cands, &active_sets, o.loss)?;
         // Newton systems for every active start, then damping retries until each either
         // finds a decrease of its merit or gives up.
         let mut pending: Vec<(usize, Mat12, Vec12)> = Vec::new();
@@ -303,8 +332,12 @@ pub fn solve(
                 let step: [f64; NUM_PARAMS] = std::array::from_fn(|k| alpha * step[k]);
                 trials.push((apply_step(&s.c, &step), step));
             }
-            let trial_costs =
-                evaluator.costs(&trials.iter().map(|t| t.0).collect::<Vec<_>>(), o.loss)?;
+            let trial_sets: Vec<usize> = pending.iter().map(|p| sets[p.0]).collect();
+            let trial_costs = evaluator.costs_on(
+                &trials.iter().map(|t| t.0).collect::<Vec<_>>(),
+                &trial_sets,
+                o.loss,
+            )?;
             let mut still = Vec::new();
             for ((entry, (trial, step)), tc) in pending.into_iter().zip(trials).zip(trial_costs) {
                 let i = entry.0;
