@@ -28,10 +28,6 @@ use std::time::Instant;
 /// The a4 reward of the paper's procedure (its stage-2 term for a wider hole).
 pub const PAPER_A4_REWARD: f64 = 1e-4;
 
-/// The trim's smallest distance (normalised units: the cloud's RMS radius is 1), so a
-/// noise-free cloud does not lose points to rounding.
-pub const TRIM_FLOOR: f64 = 0.02;
-
 /// Fewest points a fit accepts.
 pub const MIN_POINTS: usize = 20;
 
@@ -80,15 +76,6 @@ pub struct FitOptions {
     pub hole_preference: f64,
     /// weight of the a3 penalty in stage 2 (favours the thinnest section the data allow)
     pub a3_penalty: f64,
-    /// before stage 2, leave out the stage-2 points beyond this many robust sigmas
-    /// (1.4826 x the median absolute residual, at least [`TRIM_FLOOR`]) of the best
-    /// stage-1 surface; None: keep all. 2.5 raised the 180-case suite from 101 to 103
-    /// successes at no cost in time (fewer points, fewer outliers to fight). Measured
-    /// and not kept: a refinement on the points kept after stage 2 instead (106, but 2
-    /// ms more per paper cloud, at the edge of the 10 ms target), both (107), and a
-    /// Cauchy refinement with a per-cloud scale (109, 40% more time, and a per-cloud
-    /// loss would break the lockstep batch).
-    pub trim: Option<f64>,
     /// a stage-1 runner-up with another hole axis goes on to stage 2 when its cost is
     /// within this factor of the best's
     pub runner_up_ratio: f64,
@@ -113,7 +100,6 @@ impl Default for FitOptions {
             a4_reward: 0.0,
             hole_preference: PAPER_A4_REWARD,
             a3_penalty: 0.0,
-            trim: Some(2.5),
             runner_up_ratio: 1.3,
             huber: 0.05,
             eps_min: 0.1,
@@ -185,7 +171,6 @@ pub struct BackendOut {
 pub struct PointsOut {
     pub input: usize,
     pub stage1: usize,
-    /// the stage-2 sample after the trim (the points stage 2 was fitted to)
     pub stage2: usize,
 }
 
@@ -306,8 +291,7 @@ pub fn fit_batch(
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
     let start = Instant::now();
-    let mut results: Vec<Option<Result<FitReport, FitError>>> =
-        (0..clouds.len()).map(|_| None).collect();
+    let mut results: Vec<Option<Result<FitReport, FitError>>> = (0..clouds.len()).map(|_| None).collect();
     let mut prepared: Vec<(usize, Prepared)> = Vec::new();
     for (i, (points, o)) in clouds.iter().enumerate() {
         match prepare(points, o) {
@@ -318,10 +302,13 @@ pub fn fit_batch(
     // lockstep groups: clouds with the same solver settings for both stages
     let mut groups: Vec<Vec<(usize, Prepared)>> = Vec::new();
     for (i, p) in prepared {
-        match groups.iter_mut().find(|g| {
-            let q = &g[0].1;
-            (q.bounds, q.opts1, q.opts2, q.trim) == (p.bounds, p.opts1, p.opts2, p.trim)
-        }) {
+        match groups
+            .iter_mut()
+            .find(|g| {
+                let q = &g[0].1;
+                (q.bounds, q.opts1, q.opts2) == (p.bounds, p.opts1, p.opts2)
+            })
+        {
             Some(g) => g.push((i, p)),
             None => groups.push(vec![(i, p)]),
         }
@@ -351,8 +338,6 @@ struct Prepared<'a> {
     opts2: SolverOptions,
     /// a stage-1 runner-up in another basin within this cost ratio goes on to stage 2
     runner_up_ratio: Option<f64>,
-    /// refit without the points beyond this many robust sigmas of the stage-2 surface
-    trim: Option<f64>,
     hole_preference: f64,
 }
 
@@ -483,12 +468,6 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
         opts1.fixed[2] = true;
     }
 
-    let trim = o.trim.filter(|_| !paper);
-    if trim.is_some_and(|t| !(t.is_finite() && t > 0.0)) {
-        return Err(FitError::InvalidOption(
-            "trim must be a positive number of sigmas".into(),
-        ));
-    }
     let opts2 = SolverOptions {
         loss,
         shape_prior: [0.0, 0.0, o.a3_penalty, -a4_reward, 0.0, 0.0],
@@ -513,7 +492,6 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
         opts1,
         opts2,
         runner_up_ratio: (!paper).then_some(o.runner_up_ratio),
-        trim,
         hole_preference,
     })
 }
@@ -548,54 +526,8 @@ fn fit_group(
     // Stage 2: the finalists of every cloud, on its cloud's 1000-point sample.
     let samples: Vec<&[DVec3]> = group.iter().map(|(_, p)| p.stage2_pts.as_slice()).collect();
     evaluator.set_point_sets(&samples)?;
-    // Trim: the stage-2 points farther than `trim` robust sigmas from the best stage-1
-    // surface are left out of stage 2, so that outliers stop pulling on the shape. Each
-    // cloud keeps its own points; the clouds stay in lockstep.
-    let trimmed: Vec<Vec<DVec3>>;
-    let mut stage2_counts: Vec<usize> = group.iter().map(|(_, p)| p.stage2_pts.len()).collect();
-    if let Some(trim) = group[0].1.trim {
-        let all: Vec<usize> = (0..group.len()).collect();
-        let best: Vec<Candidate> = finalists.iter().map(|f| f[0]).collect();
-        let residuals = evaluator.residuals_on(&best, &all)?;
-        let mut offset = 0;
-        trimmed = group
-            .iter()
-            .map(|(_, p)| {
-                let r = &residuals[offset..offset + p.stage2_pts.len()];
-                offset += p.stage2_pts.len();
-                let kept = inliers(&p.stage2_pts, r, trim);
-                // a cloud the trim would leave too small keeps its whole sample
-                if kept.len() >= MIN_POINTS {
-                    kept
-                } else {
-                    p.stage2_pts.clone()
-                }
-            })
-            .collect();
-        let sets: Vec<&[DVec3]> = trimmed.iter().map(|k| k.as_slice()).collect();
-        evaluator.set_point_sets(&sets)?;
-        stage2_counts = trimmed.iter().map(|k| k.len()).collect();
-    }
     let (candidates, sets) = flatten(finalists.into_iter());
     let stage2 = solve_on(evaluator, &candidates, &sets, &bounds, &opts2)?;
-    let chosen: Vec<Solution> = group
-        .iter()
-        .enumerate()
-        .map(|(cloud, (_, p))| {
-            // between finalists, the lower cost wins, a wider hole breaking near-ties
-            let merit =
-                |s: &Solution| s.cost - p.hole_preference * s.candidate.shape.a4 * s.count as f64;
-            stage2
-                .iter()
-                .zip(&sets)
-                .filter(|(_, s)| **s == cloud)
-                .map(|(sol, _)| sol)
-                .min_by(|a, b| merit(a).total_cmp(&merit(b)))
-                .expect("one finalist at least")
-                .clone()
-        })
-        .collect();
-
     let t_total = start.elapsed();
 
     let timing = Timing {
@@ -605,42 +537,22 @@ fn fit_group(
     };
     Ok(group
         .iter()
-        .zip(&chosen)
         .enumerate()
-        .map(|(cloud, ((_, p), best))| {
-            let iterations = Iterations {
-                stage1: stage1_iterations[cloud],
-                stage2: best.iterations,
+        .map(|(cloud, (_, p))| {
+            // between finalists, the lower cost wins, a wider hole breaking near-ties
+            let merit = |s: &Solution| {
+                s.cost - p.hole_preference * s.candidate.shape.a4 * s.count as f64
             };
-            report(
-                p,
-                best,
-                timing.clone(),
-                iterations,
-                stage2_counts[cloud],
-                evaluator,
-            )
+            let best = stage2
+                .iter()
+                .zip(&sets)
+                .filter(|(_, s)| **s == cloud)
+                .map(|(sol, _)| sol)
+                .min_by(|a, b| merit(a).total_cmp(&merit(b)))
+                .expect("one finalist at least");
+            report(p, best, timing.clone(), stage1_iterations[cloud], evaluator)
         })
         .collect())
-}
-
-/// The points within `sigmas` robust standard deviations (1.4826 x the median absolute
-/// residual, at least [`TRIM_FLOOR`]) of the surface their residuals `r` were taken from.
-fn inliers(points: &[DVec3], r: &[f64], sigmas: f64) -> Vec<DVec3> {
-    let mut abs: Vec<f64> = r
-        .iter()
-        .filter(|x| x.is_finite())
-        .map(|x| x.abs())
-        .collect();
-    abs.sort_by(f64::total_cmp);
-    let sigma = 1.4826 * abs.get(abs.len() / 2).copied().unwrap_or(0.0);
-    let limit = (sigmas * sigma).max(TRIM_FLOOR);
-    points
-        .iter()
-        .zip(r)
-        .filter(|(_, r)| r.abs() <= limit)
-        .map(|(p, _)| *p)
-        .collect()
 }
 
 /// Concatenates per-cloud candidate lists, with the cloud index of each candidate.
@@ -680,8 +592,7 @@ fn report(
     p: &Prepared,
     solution: &Solution,
     timing_ms: Timing,
-    iterations: Iterations,
-    stage2_points: usize,
+    stage1_iterations: usize,
     evaluator: &dyn Evaluator,
 ) -> FitReport {
     let (shape, pose) = p.norm.to_world(&solution.candidate);
@@ -702,7 +613,10 @@ fn report(
         },
         quality,
         timing_ms,
-        iterations,
+        iterations: Iterations {
+            stage1: stage1_iterations,
+            stage2: solution.iterations,
+        },
         backend: BackendOut {
             kind: evaluator.kind().into(),
             adapter: evaluator.device_name(),
@@ -710,7 +624,7 @@ fn report(
         points: PointsOut {
             input: p.points.len(),
             stage1: p.stage1_pts.len(),
-            stage2: stage2_points,
+            stage2: p.stage2_pts.len(),
         },
         fitted: (shape, pose),
     }
