@@ -45,8 +45,10 @@ fn bench_fit(c: &mut Criterion) {
         .warm_up_time(Duration::from_millis(500))
         .measurement_time(Duration::from_secs(4));
     let options = FitOptions::default();
-    let batch: Vec<(&[glam::DVec3], &FitOptions)> =
-        clouds.iter().map(|(_, p)| (p.as_slice(), &options)).collect();
+    let batch: Vec<(&[glam::DVec3], &FitOptions)> = clouds
+        .iter()
+        .map(|(_, p)| (p.as_slice(), &options))
+        .collect();
     for evaluator in &mut evaluators {
         let kind = evaluator.kind();
         group.bench_function(BenchmarkId::new(kind, "one after another"), |b| {

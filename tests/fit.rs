@@ -323,10 +323,7 @@ fn a_batch_of_clouds_gives_each_cloud_its_own_fit() {
     ];
     let batch = fit_batch(&mut CpuEvaluator::new(), &clouds).unwrap();
     assert_eq!(batch.len(), clouds.len());
-    assert_eq!(
-        batch[1].as_ref().unwrap_err(),
-        &FitError::TooFewPoints(5)
-    );
+    assert_eq!(batch[1].as_ref().unwrap_err(), &FitError::TooFewPoints(5));
     for (i, (points, options)) in clouds.iter().enumerate() {
         if i == 1 {
             continue;
@@ -335,7 +332,10 @@ fn a_batch_of_clouds_gives_each_cloud_its_own_fit() {
         let together = batch[i].as_ref().unwrap();
         assert_eq!(together.fitted, alone.fitted, "cloud {i}");
         assert_eq!(together.method, options.method, "cloud {i}");
-        assert_eq!(together.iterations.stage2, alone.iterations.stage2, "cloud {i}");
+        assert_eq!(
+            together.iterations.stage2, alone.iterations.stage2,
+            "cloud {i}"
+        );
         assert_eq!(together.quality.rms_distance, alone.quality.rms_distance);
     }
 }
@@ -347,7 +347,9 @@ fn a_batch_of_clouds_fits_on_the_gpu() {
     use supertoroid::fit::fit_batch;
     let ctx =
         GpuContext::shared(&AdapterChoice::from_env()).expect("a GPU adapter (lavapipe in CI)");
-    let cases: Vec<_> = (0..3).map(|i| make_case(100 + i, false, 0.005, 0.0)).collect();
+    let cases: Vec<_> = (0..3)
+        .map(|i| make_case(100 + i, false, 0.005, 0.0))
+        .collect();
     let o = FitOptions::default();
     let clouds: Vec<(&[DVec3], &FitOptions)> =
         cases.iter().map(|c| (c.points.as_slice(), &o)).collect();
@@ -359,10 +361,13 @@ fn a_batch_of_clouds_fits_on_the_gpu() {
         assert_eq!(g.backend.kind, "gpu");
         let e_gpu = compare((&case.shape, &case.pose), (&g.fitted.0, &g.fitted.1));
         let e_cpu = compare((&case.shape, &case.pose), (&c.fitted.0, &c.fitted.1));
-        assert_eq!(e_gpu.success(), e_cpu.success(), "cloud {i}: {e_gpu:?} vs {e_cpu:?}");
+        assert_eq!(
+            e_gpu.success(),
+            e_cpu.success(),
+            "cloud {i}: {e_gpu:?} vs {e_cpu:?}"
+        );
         assert!(
-            (g.quality.rms_distance - c.quality.rms_distance).abs()
-                < 0.2 * c.quality.rms_distance,
+            (g.quality.rms_distance - c.quality.rms_distance).abs() < 0.2 * c.quality.rms_distance,
             "cloud {i}"
         );
     }

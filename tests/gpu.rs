@@ -368,7 +368,11 @@ fn candidates_on_different_point_sets_match_the_reference() {
             let shape = if round == 0 {
                 *s
             } else {
-                Shape { a1: s.a1 * 1.1, eps1: s.eps1 * 0.9, ..*s }
+                Shape {
+                    a1: s.a1 * 1.1,
+                    eps1: s.eps1 * 0.9,
+                    ..*s
+                }
             };
             batch.push(Candidate { shape, pose: *p });
             which.push(k);
@@ -390,14 +394,21 @@ fn candidates_on_different_point_sets_match_the_reference() {
     let cc = cpu.costs_on(&batch, &which, loss).unwrap();
     for (k, (a, b)) in gc.iter().zip(&cc).enumerate() {
         assert_eq!(a.count, b.count, "candidate {k}");
-        assert!((a.cost - b.cost).abs() <= 2e-3 * b.cost.max(1e-6), "candidate {k}");
+        assert!(
+            (a.cost - b.cost).abs() <= 2e-3 * b.cost.max(1e-6),
+            "candidate {k}"
+        );
     }
     let gr = gpu.residuals_on(&batch, &which).unwrap();
     let cr = cpu.residuals_on(&batch, &which).unwrap();
     let expected: usize = which.iter().map(|&k| clouds[k].len()).sum();
     assert_eq!(gr.len(), expected);
     assert_eq!(cr.len(), expected);
-    let far = gr.iter().zip(&cr).filter(|(a, b)| (*a - *b).abs() > 1e-3).count();
+    let far = gr
+        .iter()
+        .zip(&cr)
+        .filter(|(a, b)| (*a - *b).abs() > 1e-3)
+        .count();
     assert!(far * 100 < expected, "{far} of {expected} residuals differ");
     assert!(matches!(
         gpu.costs_on(&batch[..1], &[3], loss),

@@ -558,7 +558,11 @@ fn batch_fits_every_cloud_and_reports_each_error() {
             .unwrap()
             .json()
             .unwrap();
-        assert_same_fit(&results[i]["fit"], &single, &format!("batch vs single, cloud {i}"));
+        assert_same_fit(
+            &results[i]["fit"],
+            &single,
+            &format!("batch vs single, cloud {i}"),
+        );
     }
 }
 
@@ -595,7 +599,10 @@ fn a_batch_fits_on_the_gpu_as_well_as_single_requests() {
         let (a, b) = (shape_of(fit), shape_of(&single));
         // f32 partial sums are added in another order in a batch: close, not identical
         for (x, y) in a.iter().zip(&b) {
-            assert!((x - y).abs() <= 0.02 * y.abs().max(0.1), "cloud {i}: {a:?} vs {b:?}");
+            assert!(
+                (x - y).abs() <= 0.02 * y.abs().max(0.1),
+                "cloud {i}: {a:?} vs {b:?}"
+            );
         }
     }
 }

@@ -521,7 +521,6 @@ impl GpuEvaluator {
             })
             .collect())
     }
-
 }
 
 /// Every partial ends in the marker 1.0 that its workgroup writes last.
@@ -646,7 +645,11 @@ impl Evaluator for GpuEvaluator {
         Ok(out
             .chunks(longest.max(1))
             .zip(sets)
-            .flat_map(|(block, &s)| block[..self.sets[s].1 as usize].iter().map(|&v| f64::from(v)))
+            .flat_map(|(block, &s)| {
+                block[..self.sets[s].1 as usize]
+                    .iter()
+                    .map(|&v| f64::from(v))
+            })
             .collect())
     }
 }

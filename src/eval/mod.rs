@@ -189,7 +189,11 @@ pub trait Evaluator: Send {
 
 /// Checks one set index per candidate against the sizes of the uploaded sets: every named
 /// set must exist and hold points.
-pub(crate) fn check_sets(candidates: usize, sets: &[usize], sizes: &[usize]) -> Result<(), EvalError> {
+pub(crate) fn check_sets(
+    candidates: usize,
+    sets: &[usize],
+    sizes: &[usize],
+) -> Result<(), EvalError> {
     if sets.len() != candidates {
         return Err(EvalError::BadSet(format!(
             "{} set indices for {candidates} candidates",

@@ -13,6 +13,10 @@
 //! 4. Stage 2: the winner refined on the stage-2 sample; mapped back to world units. The
 //!    paper's a4 reward for partial clouds runs only in `Method::Paper` (it was measured
 //!    to hurt, see [`FitOptions::a4_reward`]).
+//!
+//! [`fit_batch`] runs both stages for many clouds in lockstep (each cloud's sample is a
+//! point set of the evaluator, each start names its cloud's set), so one batched
+//! evaluation per solver iteration serves every cloud; [`fit`] is a batch of one.
 
 pub mod ground_truth;
 pub mod starts;
@@ -291,7 +295,8 @@ pub fn fit_batch(
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
     let start = Instant::now();
-    let mut results: Vec<Option<Result<FitReport, FitError>>> = (0..clouds.len()).map(|_| None).collect();
+    let mut results: Vec<Option<Result<FitReport, FitError>>> =
+        (0..clouds.len()).map(|_| None).collect();
     let mut prepared: Vec<(usize, Prepared)> = Vec::new();
     for (i, (points, o)) in clouds.iter().enumerate() {
         match prepare(points, o) {
@@ -302,13 +307,10 @@ pub fn fit_batch(
     // lockstep groups: clouds with the same solver settings for both stages
     let mut groups: Vec<Vec<(usize, Prepared)>> = Vec::new();
     for (i, p) in prepared {
-        match groups
-            .iter_mut()
-            .find(|g| {
-                let q = &g[0].1;
-                (q.bounds, q.opts1, q.opts2) == (p.bounds, p.opts1, p.opts2)
-            })
-        {
+        match groups.iter_mut().find(|g| {
+            let q = &g[0].1;
+            (q.bounds, q.opts1, q.opts2) == (p.bounds, p.opts1, p.opts2)
+        }) {
             Some(g) => g.push((i, p)),
             None => groups.push(vec![(i, p)]),
         }
@@ -540,9 +542,8 @@ fn fit_group(
         .enumerate()
         .map(|(cloud, (_, p))| {
             // between finalists, the lower cost wins, a wider hole breaking near-ties
-            let merit = |s: &Solution| {
-                s.cost - p.hole_preference * s.candidate.shape.a4 * s.count as f64
-            };
+            let merit =
+                |s: &Solution| s.cost - p.hole_preference * s.candidate.shape.a4 * s.count as f64;
             let best = stage2
                 .iter()
                 .zip(&sets)
