@@ -113,6 +113,16 @@ fn assert_same_fit(a: &Value, b: &Value, what: &str) {
     assert_eq!(a["pose"]["translation"], b["pose"]["translation"], "{what}");
 }
 
+/// POSTs a JSON body and reads the JSON answer.
+fn post_json(c: &Client, s: &Server, path: &str, body: &Value) -> Value {
+    c.post(s.url(path))
+        .json(body)
+        .send()
+        .unwrap()
+        .json()
+        .unwrap()
+}
+
 fn post_pcd(c: &Client, s: &Server, bytes: Vec<u8>, query: &str) -> reqwest::blocking::Response {
     c.post(s.url(&format!("/v1/fit{query}")))
         .header("content-type", "application/octet-stream")
@@ -537,13 +547,7 @@ fn batch_fits_every_cloud_and_reports_each_error() {
         json!({"points": cloud(2)}),
         json!({"points": case_points(6, true, 0.0, 0.0), "options": {"seed": 3, "method": "paper"}}),
     ];
-    let v: Value = c
-        .post(server.url("/v1/fit/batch"))
-        .json(&json!({ "clouds": singles }))
-        .send()
-        .unwrap()
-        .json()
-        .unwrap();
+    let v = post_json(&c, &server, "/v1/fit/batch", &json!({ "clouds": singles }));
     let results = v["results"].as_array().unwrap();
     assert_eq!(results.len(), 4);
     assert_eq!(results[1]["error"]["code"], "too_few_points");
@@ -551,13 +555,7 @@ fn batch_fits_every_cloud_and_reports_each_error() {
     // each cloud alone gives the same fit (the lockstep batch is exact on the CPU)
     for i in [0, 2, 3] {
         assert!(results[i]["fit"]["shape"].is_object());
-        let single: Value = c
-            .post(server.url("/v1/fit"))
-            .json(&singles[i])
-            .send()
-            .unwrap()
-            .json()
-            .unwrap();
+        let single = post_json(&c, &server, "/v1/fit", &singles[i]);
         assert_same_fit(
             &results[i]["fit"],
             &single,
@@ -578,24 +576,12 @@ fn a_batch_fits_on_the_gpu_as_well_as_single_requests() {
     let clouds: Vec<Value> = (0..3)
         .map(|i| json!({"points": case_points(100 + i, false, 0.005, 0.0), "options": {"seed": i}}))
         .collect();
-    let v: Value = c
-        .post(server.url("/v1/fit/batch"))
-        .json(&json!({ "clouds": clouds }))
-        .send()
-        .unwrap()
-        .json()
-        .unwrap();
+    let v = post_json(&c, &server, "/v1/fit/batch", &json!({ "clouds": clouds }));
     let results = v["results"].as_array().unwrap();
     for (i, cloud) in clouds.iter().enumerate() {
         let fit = &results[i]["fit"];
         assert_eq!(fit["backend"]["kind"], "gpu", "{v}");
-        let single: Value = c
-            .post(server.url("/v1/fit"))
-            .json(cloud)
-            .send()
-            .unwrap()
-            .json()
-            .unwrap();
+        let single = post_json(&c, &server, "/v1/fit", cloud);
         let (a, b) = (shape_of(fit), shape_of(&single));
         // f32 partial sums are added in another order in a batch: close, not identical
         for (x, y) in a.iter().zip(&b) {
