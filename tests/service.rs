@@ -84,6 +84,14 @@ fn cpu_config() -> ServiceConfig {
     }
 }
 
+/// The GPU evaluator: lavapipe in CI.
+fn gpu_config() -> ServiceConfig {
+    ServiceConfig {
+        backend: Backend::Gpu,
+        ..Default::default()
+    }
+}
+
 fn client() -> Client {
     Client::builder()
         .timeout(std::time::Duration::from_secs(120))
@@ -568,10 +576,7 @@ fn batch_fits_every_cloud_and_reports_each_error() {
 /// dispatches, each fitted as well as alone.
 #[test]
 fn a_batch_fits_on_the_gpu_as_well_as_single_requests() {
-    let server = Server::start(ServiceConfig {
-        backend: Backend::Gpu,
-        ..Default::default()
-    });
+    let server = Server::start(gpu_config());
     let c = client();
     let clouds: Vec<Value> = (0..3)
         .map(|i| json!({"points": case_points(100 + i, false, 0.005, 0.0), "options": {"seed": i}}))
@@ -596,10 +601,7 @@ fn a_batch_fits_on_the_gpu_as_well_as_single_requests() {
 #[test]
 fn concurrent_requests_all_succeed_and_match_the_sequential_results() {
     // the GPU evaluator (lavapipe in CI): the service shares one context among requests
-    let server = Server::start(ServiceConfig {
-        backend: Backend::Gpu,
-        ..Default::default()
-    });
+    let server = Server::start(gpu_config());
     let c = client();
     let ready: Value = c.get(server.url("/readyz")).send().unwrap().json().unwrap();
     if std::env::var("CI").is_ok_and(|v| v == "true") {

@@ -59,7 +59,7 @@ impl CpuEvaluator {
             .enumerate()
             .flat_map(|(k, &s)| (0..self.sets[s].1.div_ceil(CHUNK)).map(move |j| (k, j)))
             .collect();
-        let mut results: Vec<(usize, T)> = items
+        let results: Vec<(usize, T)> = items
             .into_par_iter()
             .map(|(k, j)| {
                 let set = self.set(sets[k]);
@@ -69,7 +69,7 @@ impl CpuEvaluator {
             .collect();
         let mut out: Vec<Vec<T>> = (0..sets.len()).map(|_| Vec::new()).collect();
         // `collect` keeps the items' order: candidate by candidate, chunk by chunk
-        for (k, t) in results.drain(..) {
+        for (k, t) in results {
             out[k].push(t);
         }
         out
