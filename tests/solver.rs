@@ -5,7 +5,7 @@ use glam::DVec3;
 use proptest::prelude::*;
 use supertoroid::eval::*;
 use supertoroid::model::{Pose, Shape};
-use supertoroid::solve::{Bounds, SolverOptions, Stop, solve};
+use supertoroid::solve::{Bounds, SolverOptions, Stop, solve, solve_on};
 
 /// Residuals r(theta) of the first nine parameters (shape, translation) with their Jacobian.
 struct Mock {
@@ -174,6 +174,44 @@ fn rosenbrock_with_an_active_bound() {
         sol.stop
     );
     assert_ne!(sol.stop, Stop::IterationCap);
+}
+
+#[test]
+fn each_start_keeps_to_its_own_box() {
+    // the bounded linear problem from two starts, the second in a tighter box: each ends
+    // on its own bound (the fit caps a stage-2 finalist's sizes by its cloud's extent)
+    fn r(t: &[f64; 9]) -> (Vec<f64>, Vec<[f64; 9]>) {
+        let target = [0.5, 3.0, -1.0, 2.0, 1.0, 0.05];
+        let mut res = Vec::new();
+        let mut jac = Vec::new();
+        for k in 0..6 {
+            res.push(t[k] - target[k]);
+            let mut row = [0.0; 9];
+            row[k] = 1.0;
+            jac.push(row);
+        }
+        (res, jac)
+    }
+    let wide = Bounds::new(0.1, 2.0, 4.0, 0.1, 2.0);
+    let mut tight = wide;
+    tight.upper[1] = 1.2;
+    let mut mock = Mock {
+        residuals: r,
+        seen: Vec::new(),
+    };
+    let sols = solve_on(
+        &mut mock,
+        &[start([1.0; 6]), start([1.0; 6])],
+        &[0, 0],
+        &[wide, tight],
+        &rotation_fixed(),
+    )
+    .unwrap();
+    let a2 = |k: usize| sols[k].candidate.shape.a2;
+    assert!((a2(0) - 2.0).abs() < 1e-3, "wide box: a2 = {}", a2(0));
+    assert!((a2(1) - 1.2).abs() < 1e-3, "tight box: a2 = {}", a2(1));
+    // one box per start, or an error
+    assert!(solve_on(&mut mock, &[start([1.0; 6])], &[0], &[], &rotation_fixed()).is_err());
 }
 
 proptest! {

@@ -124,6 +124,7 @@ pub struct Solution {
 
 struct State {
     c: Candidate,
+    bounds: Bounds,
     z_lower: [f64; 6],
     z_upper: [f64; 6],
     mu: f64,
@@ -178,32 +179,40 @@ pub fn solve(
     bounds: &Bounds,
     o: &SolverOptions,
 ) -> Result<Vec<Solution>, EvalError> {
-    solve_on(evaluator, starts, &vec![0; starts.len()], bounds, o)
+    solve_on(
+        evaluator,
+        starts,
+        &vec![0; starts.len()],
+        &vec![*bounds; starts.len()],
+        o,
+    )
 }
 
 /// Solves from every start, start k on the evaluator's point set `sets[k]`: the starts of
 /// several clouds in lockstep, one batched evaluator call per iteration for all of them.
 /// Starts never interact except through pruning, which compares a start only with the
 /// best start of its own set; so each cloud's solutions are the ones `solve` gives it
-/// alone (bit for bit on the CPU evaluator).
+/// alone (bit for bit on the CPU evaluator). Each start has its own box, `bounds[k]`.
 pub fn solve_on(
     evaluator: &mut dyn Evaluator,
     starts: &[Candidate],
     sets: &[usize],
-    bounds: &Bounds,
+    bounds: &[Bounds],
     o: &SolverOptions,
 ) -> Result<Vec<Solution>, EvalError> {
-    if sets.len() != starts.len() {
+    if sets.len() != starts.len() || bounds.len() != starts.len() {
         return Err(EvalError::BadSet(format!(
-            "{} set indices for {} starts",
+            "{} set indices and {} bounds for {} starts",
             sets.len(),
+            bounds.len(),
             starts.len()
         )));
     }
     let first = evaluator.costs_on(
         &starts
             .iter()
-            .map(|s| Candidate {
+            .zip(bounds)
+            .map(|(s, bounds)| Candidate {
                 shape: bounds.interior(&s.shape),
                 ..*s
             })
@@ -214,7 +223,8 @@ pub fn solve_on(
     let mut states: Vec<State> = starts
         .iter()
         .zip(&first)
-        .map(|(s, c0)| {
+        .zip(bounds)
+        .map(|((s, c0), bounds)| {
             let c = Candidate {
                 shape: bounds.interior(&s.shape),
                 ..*s
@@ -230,6 +240,7 @@ pub fn solve_on(
             }
             State {
                 c,
+                bounds: *bounds,
                 z_lower,
                 z_upper,
                 mu,
@@ -272,6 +283,7 @@ pub fn solve_on(
         for (slot, &i) in active.iter().enumerate() {
             let s = &mut states[i];
             let ne = &normal[slot];
+            let bounds = s.bounds;
             s.cost = ne.cost;
             s.count = ne.count;
             s.iterations += 1;
@@ -311,6 +323,7 @@ pub fn solve_on(
             let mut trials = Vec::new();
             for (i, h, g) in &pending {
                 let s = &states[*i];
+                let bounds = s.bounds;
                 let mut damped = *h;
                 for k in 0..NUM_PARAMS {
                     damped[(k, k)] += s.damping * h[(k, k)].max(1e-12);
@@ -342,8 +355,9 @@ pub fn solve_on(
             for ((entry, (trial, step)), tc) in pending.into_iter().zip(trials).zip(trial_costs) {
                 let i = entry.0;
                 let s = &mut states[i];
-                let before = merit(s.cost, s.count, &s.c.shape, bounds, s.mu, o);
-                let after = merit(tc.cost, tc.count, &trial.shape, bounds, s.mu, o);
+                let bounds = s.bounds;
+                let before = merit(s.cost, s.count, &s.c.shape, &bounds, s.mu, o);
+                let after = merit(tc.cost, tc.count, &trial.shape, &bounds, s.mu, o);
                 let step_norm = step.iter().map(|x| x * x).sum::<f64>().sqrt();
                 if after.is_finite() && tc.count == s.count && after <= before {
                     // dual update towards the central path of the current mu, then a
