@@ -353,7 +353,7 @@ fn distance(args: DistanceArgs) -> Result<(), Failure> {
             .map(|p| meridian_distance(&shape, pose.to_canonical(*p)).distance)
             .collect()
     } else {
-        let mut evaluator = make_evaluator(backend).map_err(|e| Failure {
+        let mut evaluator = make_evaluator(backend, points.len()).map_err(|e| Failure {
             code: 1,
             message: e.to_string(),
         })?;
@@ -407,7 +407,8 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         .backend
         .or_else(Backend::from_env)
         .unwrap_or(Backend::Auto);
-    let mut evaluator = make_evaluator(backend).map_err(|e| Failure {
+    let work = options.stage2_points.min(points.len());
+    let mut evaluator = make_evaluator(backend, work).map_err(|e| Failure {
         code: 1,
         message: e.to_string(),
     })?;

@@ -228,7 +228,7 @@ pub fn run(
     if runs == 0 {
         return Err("--runs must be at least 1".into());
     }
-    let mut evaluator = make_evaluator(backend).map_err(|e| e.to_string())?;
+    let mut evaluator = make_evaluator(backend, base.stage2_points).map_err(|e| e.to_string())?;
     let bar = super::progress((files.len() * runs) as u64, "paper clouds");
     let mut rows = Vec::new();
     let mut all_runs = Vec::new();

@@ -100,7 +100,7 @@ pub fn run(
     if cases == 0 {
         return Err("--cases must be at least 1".into());
     }
-    let mut evaluator = make_evaluator(backend).map_err(|e| e.to_string())?;
+    let mut evaluator = make_evaluator(backend, base.stage2_points).map_err(|e| e.to_string())?;
     let bar = super::progress(cases as u64, "ground-truth suite");
     let mut out = Vec::with_capacity(cases);
     let mut pictures = Vec::new();

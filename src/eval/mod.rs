@@ -326,17 +326,38 @@ impl Backend {
     }
 }
 
-/// Makes the evaluator a backend choice asks for. `Gpu` fails when no adapter is found;
-/// `Auto` takes a hardware GPU and otherwise the f64 CPU evaluator: a software adapter
-/// (lavapipe) runs the same two cores as the CPU evaluator, and whole fits (150-1000
-/// points, many small dispatches) measured slower on it (about 40 ms against 27 ms per
-/// paper cloud), so `auto` leaves it to an explicit `gpu`.
-pub fn make_evaluator(backend: Backend) -> Result<Box<dyn Evaluator>, EvalError> {
+/// Points per CPU thread from which `auto` sends a fit to a hardware GPU. Whole fits are
+/// many small dispatches, each waiting for its result, so a GPU pays off only on large
+/// stage-2 samples. Measured on an H100 against the 16 threads of its host (Vulkan,
+/// `--stage2-points` N on a 300k-point cloud, median of 5 seeds): N = 1000: CPU 11.8 ms,
+/// GPU 31.0 ms; 16000: 15.0 vs 26.7; 64000: 22.3 vs 33.7; 300000: 56.2 vs 49.0. The
+/// crossover near 200k points on 16 threads scales with the threads the CPU has.
+pub const AUTO_GPU_POINTS_PER_THREAD: usize = 12_000;
+
+/// Whether `auto` takes a hardware GPU for fits that evaluate `points_per_candidate`
+/// points per candidate (the stage-2 sample): see [`AUTO_GPU_POINTS_PER_THREAD`].
+pub fn auto_prefers_gpu(points_per_candidate: usize) -> bool {
+    points_per_candidate >= AUTO_GPU_POINTS_PER_THREAD * rayon::current_num_threads()
+}
+
+/// Makes the evaluator a backend choice asks for, for work of `points_per_candidate`
+/// points per candidate. `Gpu` fails when no adapter is found. `Auto` takes a hardware
+/// GPU when the work is large enough for one to win ([`auto_prefers_gpu`]), and the f64
+/// CPU evaluator otherwise. It never takes a software adapter: lavapipe runs the same
+/// cores as the CPU evaluator, and whole fits (150-1000 points, many small dispatches)
+/// measured slower on it (about 40 ms against 27 ms per paper cloud).
+pub fn make_evaluator(
+    backend: Backend,
+    points_per_candidate: usize,
+) -> Result<Box<dyn Evaluator>, EvalError> {
     match backend {
         Backend::Cpu => Ok(Box::new(CpuEvaluator::new())),
         Backend::Gpu => Ok(Box::new(GpuEvaluator::new(GpuContext::shared(
             &AdapterChoice::from_env(),
         )?))),
+        Backend::Auto if !auto_prefers_gpu(points_per_candidate) => {
+            Ok(Box::new(CpuEvaluator::new()))
+        }
         Backend::Auto => match GpuContext::shared(&AdapterChoice::from_env()) {
             Ok(ctx) if !ctx.is_software() => Ok(Box::new(GpuEvaluator::new(ctx))),
             _ => Ok(Box::new(CpuEvaluator::new())),

@@ -12,7 +12,9 @@
 
 use super::config::ServiceConfig;
 use super::error::ApiError;
-use crate::eval::{AdapterChoice, Backend, CpuEvaluator, Evaluator, GpuContext, GpuEvaluator};
+use crate::eval::{
+    AdapterChoice, Backend, CpuEvaluator, Evaluator, GpuContext, GpuEvaluator, auto_prefers_gpu,
+};
 use crate::fit::{FitOptions, FitReport, fit_batch};
 use axum::http::StatusCode;
 use glam::DVec3;
@@ -24,6 +26,8 @@ use tokio::sync::Semaphore;
 
 pub struct Fitter {
     gpu: Option<Arc<GpuContext>>,
+    /// the service's `--backend`: what a request that names none gets
+    configured: Backend,
     /// why the GPU is not in use, when it is not
     degraded: Arc<Mutex<Option<String>>>,
     admission: Arc<Semaphore>,
@@ -38,7 +42,8 @@ pub struct Fitter {
 #[derive(Serialize, utoipa::ToSchema)]
 pub struct Readiness {
     pub ready: bool,
-    /// the evaluator fits run on now: gpu or cpu
+    /// gpu when a GPU is in use (for clouds that ask for it, and under `auto` for those
+    /// with large stage-2 samples; the rest fit on the CPU), else cpu
     pub backend: String,
     pub adapter: Option<String>,
     /// why the GPU is not used, when it was wanted
@@ -75,6 +80,7 @@ impl Fitter {
         let workers = config.workers();
         Self {
             gpu,
+            configured: config.backend,
             degraded: Arc::new(Mutex::new(degraded)),
             admission: Arc::new(Semaphore::new(workers + config.queue_depth)),
             workers: Arc::new(Semaphore::new(workers)),
@@ -119,8 +125,15 @@ impl Fitter {
     /// timeout, or the GPU asked for and not available.
     pub async fn run(
         &self,
-        jobs: Vec<FitJob>,
+        mut jobs: Vec<FitJob>,
     ) -> Result<Vec<Result<FitReport, ApiError>>, ApiError> {
+        // a service started with `--backend gpu` (or cpu) decides for requests that leave
+        // the choice to it
+        for job in &mut jobs {
+            if job.backend == Backend::Auto {
+                job.backend = self.configured;
+            }
+        }
         let admission = self
             .admission
             .clone()
@@ -206,8 +219,15 @@ fn run_jobs_here(
     degraded: &Mutex<Option<String>>,
 ) -> Vec<Result<FitReport, ApiError>> {
     let mut results: Vec<Option<Result<FitReport, ApiError>>> = jobs.iter().map(|_| None).collect();
+    // `auto` clouds go to the GPU only when their stage-2 sample is large enough for it
+    // to win (`eval::auto_prefers_gpu`)
+    let wants_gpu = |job: &FitJob| match job.backend {
+        Backend::Gpu => true,
+        Backend::Cpu => false,
+        Backend::Auto => auto_prefers_gpu(job.options.stage2_points.min(job.points.len())),
+    };
     let (on_gpu, on_cpu): (Vec<usize>, Vec<usize>) =
-        (0..jobs.len()).partition(|&i| jobs[i].backend != Backend::Cpu && gpu.is_some());
+        (0..jobs.len()).partition(|&i| gpu.is_some() && wants_gpu(&jobs[i]));
     let clouds = |indices: &[usize]| -> Vec<(&[DVec3], &FitOptions)> {
         indices
             .iter()
