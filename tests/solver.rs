@@ -100,24 +100,26 @@ fn rotation_fixed() -> SolverOptions {
     o
 }
 
+/// r = x - target for the six shape parameters (a bounded linear least-squares problem).
+fn linear_residuals(t: &[f64; 9]) -> (Vec<f64>, Vec<[f64; 9]>) {
+    let target = [0.5, 3.0, -1.0, 2.0, 1.0, 0.05];
+    let mut res = Vec::new();
+    let mut jac = Vec::new();
+    for k in 0..6 {
+        res.push(t[k] - target[k]);
+        let mut row = [0.0; 9];
+        row[k] = 1.0;
+        jac.push(row);
+    }
+    (res, jac)
+}
+
 #[test]
 fn bounded_linear_least_squares() {
     // r = x - target for the six shape parameters; targets outside the box end on the bound.
-    fn r(t: &[f64; 9]) -> (Vec<f64>, Vec<[f64; 9]>) {
-        let target = [0.5, 3.0, -1.0, 2.0, 1.0, 0.05];
-        let mut res = Vec::new();
-        let mut jac = Vec::new();
-        for k in 0..6 {
-            res.push(t[k] - target[k]);
-            let mut row = [0.0; 9];
-            row[k] = 1.0;
-            jac.push(row);
-        }
-        (res, jac)
-    }
     let bounds = Bounds::new(0.1, 2.0, 4.0, 0.1, 2.0);
     let mut mock = Mock {
-        residuals: r,
+        residuals: linear_residuals,
         seen: Vec::new(),
     };
     let sol = solve(&mut mock, &[start([1.0; 6])], &bounds, &rotation_fixed())
@@ -180,23 +182,11 @@ fn rosenbrock_with_an_active_bound() {
 fn each_start_keeps_to_its_own_box() {
     // the bounded linear problem from two starts, the second in a tighter box: each ends
     // on its own bound (the fit caps a stage-2 finalist's sizes by its cloud's extent)
-    fn r(t: &[f64; 9]) -> (Vec<f64>, Vec<[f64; 9]>) {
-        let target = [0.5, 3.0, -1.0, 2.0, 1.0, 0.05];
-        let mut res = Vec::new();
-        let mut jac = Vec::new();
-        for k in 0..6 {
-            res.push(t[k] - target[k]);
-            let mut row = [0.0; 9];
-            row[k] = 1.0;
-            jac.push(row);
-        }
-        (res, jac)
-    }
     let wide = Bounds::new(0.1, 2.0, 4.0, 0.1, 2.0);
     let mut tight = wide;
     tight.upper[1] = 1.2;
     let mut mock = Mock {
-        residuals: r,
+        residuals: linear_residuals,
         seen: Vec::new(),
     };
     let sols = solve_on(

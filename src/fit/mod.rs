@@ -580,15 +580,12 @@ fn fit_group(
                     s.cost - p.hole_preference * s.candidate.shape.a4 * s.count as f64,
                 )
             };
-            let best = stage2
+            let (_, best) = stage2
                 .iter()
                 .zip(&sets)
                 .filter(|(_, s)| **s == cloud)
-                .map(|(sol, _)| sol)
-                .min_by(|a, b| {
-                    let (a, b) = (merit(a), merit(b));
-                    a.0.cmp(&b.0).then(a.1.total_cmp(&b.1))
-                })
+                .map(|(sol, _)| (merit(sol), sol))
+                .min_by(|(a, _), (b, _)| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)))
                 .expect("one finalist at least");
             report(p, best, timing.clone(), stage1_iterations[cloud], evaluator)
         })
