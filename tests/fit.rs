@@ -45,6 +45,46 @@ fn full_clouds_are_recovered_within_the_ground_truth_bounds() {
     );
 }
 
+/// The suite's categories where the method reaches the 90% that issue 4 asks of its CI
+/// subset: every full cloud with noise of at most 1% of the size (0, 5 and 10% outliers)
+/// among the 180 cases of `bench synthetic` (default seeds), 60 cases. Measured when this
+/// test was written: 54 of 60 (90%; 56 of 60 on seeds 20000 and 30000). The other
+/// categories do not reach it (README: Results): this is a floor for what works, not the
+/// issue's representative subset.
+#[test]
+fn ninety_percent_of_full_clouds_with_up_to_one_percent_noise() {
+    use supertoroid::bench::synthetic::{DEFAULT_SEED, category};
+    let mut evaluator = CpuEvaluator::new();
+    let (mut cases, mut successes) = (0, 0);
+    for i in 0..180 {
+        let (partial, noise, outliers) = category(i);
+        if partial || noise > 0.011 {
+            continue;
+        }
+        let seed = DEFAULT_SEED + i as u64;
+        let case = make_case(seed, partial, noise, outliers);
+        let options = FitOptions {
+            seed,
+            ..Default::default()
+        };
+        let report = fit(&mut evaluator, &case.points, &options).unwrap();
+        let e = compare(
+            (&case.shape, &case.pose),
+            (&report.fitted.0, &report.fitted.1),
+        );
+        if !e.success() {
+            eprintln!("case {seed}: noise {noise} outliers {outliers}: {e:?}");
+        }
+        cases += 1;
+        successes += e.success() as usize;
+    }
+    assert_eq!(cases, 60);
+    assert!(
+        successes * 10 >= cases * 9,
+        "{successes} of {cases} full clouds with noise <= 1% recovered (90% asked)"
+    );
+}
+
 /// Successes on the single-view partial cases (odd seeds 1..23; noise 0/1/2% and
 /// outliers 0/5/10% by seed) with a method.
 fn partial_successes(method: supertoroid::fit::Method) -> usize {
