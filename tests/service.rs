@@ -787,34 +787,73 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
     assert!(fit_schema.to_string().contains("request_id"));
 }
 
-#[test]
-fn sigterm_lets_the_in_flight_fit_finish() {
-    // a real `supertoroid serve` process on a free port
+/// A real `supertoroid serve` process on a free port, once it answers /healthz.
+fn spawn_serve(args: &[&str], env: &[(&str, &str)]) -> (std::process::Child, String) {
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
         .unwrap()
         .port();
-    let mut server = Command::new(env!("CARGO_BIN_EXE_supertoroid"))
-        .args([
-            "serve",
-            "--bind",
-            &format!("127.0.0.1:{port}"),
-            "--backend",
-            "cpu",
-        ])
-        .env("SUPERTOROID_LOG_FORMAT", "json")
+    let bind = format!("127.0.0.1:{port}");
+    let mut command = Command::new(env!("CARGO_BIN_EXE_supertoroid"));
+    command
+        .args(["serve", "--bind", &bind])
+        .args(args)
+        .envs(env.iter().copied())
         .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let url = format!("http://127.0.0.1:{port}");
-    let c = client();
+        .stderr(std::process::Stdio::null());
+    let server = command.spawn().unwrap();
+    let url = format!("http://{bind}");
     let started = std::time::Instant::now();
-    while c.get(format!("{url}/healthz")).send().is_err() {
+    while client().get(format!("{url}/healthz")).send().is_err() {
         assert!(started.elapsed().as_secs() < 30, "server did not start");
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
+    (server, url)
+}
+
+/// A service started with `--backend gpu` whose GPU is missing runs degraded: requests
+/// that leave the backend to it fit on the CPU, requests that insist on the GPU get 422.
+#[test]
+fn a_gpu_service_without_its_gpu_fits_default_requests_on_the_cpu() {
+    let (mut server, url) = spawn_serve(
+        &["--backend", "gpu"],
+        &[("SUPERTOROID_ADAPTER", "no-such-adapter")],
+    );
+    let c = client();
+    let points = case_points(3, false, 0.0, 0.0);
+    let fitted = c
+        .post(format!("{url}/v1/fit"))
+        .json(&json!({ "points": points }))
+        .send()
+        .unwrap();
+    assert_eq!(fitted.status(), 200);
+    let body: Value = fitted.json().unwrap();
+    assert_eq!(body["backend"]["kind"], "cpu", "{body}");
+    let refused = c
+        .post(format!("{url}/v1/fit"))
+        .json(&json!({ "points": points, "options": { "backend": "gpu" } }))
+        .send()
+        .unwrap();
+    assert_eq!(refused.status(), 422);
+    let body: Value = refused.json().unwrap();
+    assert_eq!(body["error"]["code"], "gpu_unavailable", "{body}");
+    let ready: Value = c
+        .get(format!("{url}/readyz"))
+        .send()
+        .unwrap()
+        .json()
+        .unwrap();
+    assert!(ready["degraded"].is_string(), "{ready}");
+    server.kill().unwrap();
+    server.wait().unwrap();
+}
+
+#[test]
+fn sigterm_lets_the_in_flight_fit_finish() {
+    let (mut server, url) =
+        spawn_serve(&["--backend", "cpu"], &[("SUPERTOROID_LOG_FORMAT", "json")]);
+    let c = client();
     let case = supertoroid::fit::ground_truth::make_case(7, false, 0.01, 0.0);
     let points: Vec<[f64; 3]> =
         synth::sample_surface(&case.shape, &case.pose, 50_000, &mut synth::rng(7))

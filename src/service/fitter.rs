@@ -127,13 +127,6 @@ impl Fitter {
         &self,
         mut jobs: Vec<FitJob>,
     ) -> Result<Vec<Result<FitReport, ApiError>>, ApiError> {
-        // a service started with `--backend gpu` (or cpu) decides for requests that leave
-        // the choice to it
-        for job in &mut jobs {
-            if job.backend == Backend::Auto {
-                job.backend = self.configured;
-            }
-        }
         let admission = self
             .admission
             .clone()
@@ -152,6 +145,13 @@ impl Fitter {
                         .unwrap_or_else(|| "started with backend cpu".into())
                 ),
             ));
+        }
+        // a service started with `--backend gpu` (or cpu) decides for requests that leave
+        // the choice to it (after the check above: with its GPU lost, they fit on the CPU)
+        for job in &mut jobs {
+            if job.backend == Backend::Auto {
+                job.backend = self.configured;
+            }
         }
         let work = async {
             self.waiting.fetch_add(1, Ordering::Relaxed);
