@@ -154,6 +154,9 @@ pub trait Evaluator: Send {
         sets: &[usize],
         loss: Loss,
     ) -> Result<Vec<NormalEquations>, EvalError>;
+    /// Costs only, a fraction of the work of normal equations: for scoring candidates.
+    /// (The solver no longer calls it: it evaluates each trial step with its normal
+    /// equations, which the next iteration reuses.)
     fn costs_on(
         &mut self,
         candidates: &[Candidate],

@@ -554,11 +554,7 @@ fn fit_group(
     let stage2_bounds: Vec<Bounds> = candidates
         .iter()
         .zip(&sets)
-        .map(|(c, &cloud)| {
-            group[cloud]
-                .1
-                .supported_bounds(c, &group[cloud].1.stage2_pts)
-        })
+        .map(|(c, &cloud)| group[cloud].1.supported_bounds(c))
         .collect();
     let stage2 = solve_on(evaluator, &candidates, &sets, &stage2_bounds, &opts2)?;
     let t_total = start.elapsed();
@@ -610,12 +606,12 @@ pub fn overreach(candidate: &Candidate, points: &[DVec3]) -> f64 {
 }
 
 impl Prepared<'_> {
-    /// The solver's box for a start: sizes no larger than `max_overreach` times the
-    /// sample's half-extent along the start's axes, about its centre.
-    fn supported_bounds(&self, candidate: &Candidate, sample: &[DVec3]) -> Bounds {
+    /// The solver's box for a stage-2 finalist: sizes no larger than `max_overreach`
+    /// times the stage-2 sample's half-extent along the finalist's axes, about its centre.
+    fn supported_bounds(&self, candidate: &Candidate) -> Bounds {
         let mut bounds = self.bounds;
         if let Some(limit) = self.max_overreach {
-            let extent = half_extents_about(candidate, sample);
+            let extent = half_extents_about(candidate, &self.stage2_pts);
             for (i, e) in extent.to_array().into_iter().enumerate() {
                 bounds.upper[i] = bounds.upper[i].min((limit * e).max(10.0 * bounds.lower[i]));
             }

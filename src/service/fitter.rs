@@ -121,8 +121,8 @@ impl Fitter {
     }
 
     /// Runs the jobs (one request's clouds) on one worker, fitted together (one lockstep
-    /// batch per evaluator); each result is the fit or the reason it failed. Err is for the request as a whole: queue full,
-    /// timeout, or the GPU asked for and not available.
+    /// batch per evaluator); each result is the fit or the reason it failed. Err is for
+    /// the request as a whole: queue full, timeout, or the GPU asked for and not available.
     pub async fn run(
         &self,
         mut jobs: Vec<FitJob>,

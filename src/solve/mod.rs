@@ -129,14 +129,12 @@ pub struct Solution {
 struct State {
     c: Candidate,
     bounds: Bounds,
-    /// the normal equations at `c`
+    /// the normal equations at `c` (its cost and point count among them)
     normal: NormalEquations,
     z_lower: [f64; 6],
     z_upper: [f64; 6],
     mu: f64,
     damping: f64,
-    cost: f64,
-    count: u64,
     iterations: usize,
     small_changes: usize,
     stop: Option<Stop>,
@@ -217,27 +215,20 @@ pub fn solve_on(
     // normal equations at every start: each state keeps those of its current iterate, and
     // a trial step is evaluated with its normal equations, which the next iteration reuses
     // when the step is taken (one evaluator call per iteration instead of two)
-    let first = evaluator.normal_equations_on(
-        &starts
-            .iter()
-            .zip(bounds)
-            .map(|(s, bounds)| Candidate {
-                shape: bounds.interior(&s.shape),
-                ..*s
-            })
-            .collect::<Vec<_>>(),
-        sets,
-        o.loss,
-    )?;
-    let mut states: Vec<State> = starts
+    let inside: Vec<Candidate> = starts
         .iter()
+        .zip(bounds)
+        .map(|(s, bounds)| Candidate {
+            shape: bounds.interior(&s.shape),
+            ..*s
+        })
+        .collect();
+    let first = evaluator.normal_equations_on(&inside, sets, o.loss)?;
+    let mut states: Vec<State> = inside
+        .into_iter()
         .zip(first)
         .zip(bounds)
-        .map(|((s, c0), bounds)| {
-            let c = Candidate {
-                shape: bounds.interior(&s.shape),
-                ..*s
-            };
+        .map(|((c, c0), bounds)| {
             // initial barrier weight: small against the cost, and the duals on the central path
             let mu = 1e-3 * c0.cost.max(1e-12) / 12.0;
             let v = c.shape.to_array();
@@ -254,8 +245,6 @@ pub fn solve_on(
                 z_upper,
                 mu,
                 damping: 1e-3,
-                cost: c0.cost,
-                count: c0.count,
                 normal: c0,
                 iterations: 0,
                 small_changes: 0,
@@ -270,10 +259,10 @@ pub fn solve_on(
             let mut best = std::collections::HashMap::<usize, f64>::new();
             for (s, &set) in states.iter().zip(sets) {
                 let b = best.entry(set).or_insert(f64::INFINITY);
-                *b = b.min(s.cost);
+                *b = b.min(s.normal.cost);
             }
             for (s, set) in states.iter_mut().zip(sets) {
-                if s.stop.is_none() && s.cost > o.prune_ratio * best[set] {
+                if s.stop.is_none() && s.normal.cost > o.prune_ratio * best[set] {
                     s.stop = Some(Stop::Pruned);
                 }
             }
@@ -291,8 +280,6 @@ pub fn solve_on(
             let s = &mut states[i];
             let ne = &s.normal;
             let bounds = s.bounds;
-            s.cost = ne.cost;
-            s.count = ne.count;
             s.iterations += 1;
             let mut h = Mat12::from_fn(|a, b| ne.jtj[a][b]);
             let mut g = Vec12::from_fn(|a, _| ne.jtr[a]);
@@ -316,8 +303,8 @@ pub fn solve_on(
                 }
             }
             let gmax = g.amax();
-            if gmax <= o.gradient_tolerance * s.cost.max(1e-300)
-                && s.mu < 1e-10 * s.cost.max(1e-300)
+            if gmax <= o.gradient_tolerance * ne.cost.max(1e-300)
+                && s.mu < 1e-10 * ne.cost.max(1e-300)
             {
                 s.stop = Some(Stop::SmallGradient);
                 continue;
@@ -363,10 +350,11 @@ pub fn solve_on(
                 let i = entry.0;
                 let s = &mut states[i];
                 let bounds = s.bounds;
-                let before = merit(s.cost, s.count, &s.c.shape, &bounds, s.mu, o);
+                let (cost, count) = (s.normal.cost, s.normal.count);
+                let before = merit(cost, count, &s.c.shape, &bounds, s.mu, o);
                 let after = merit(tc.cost, tc.count, &trial.shape, &bounds, s.mu, o);
                 let step_norm = step.iter().map(|x| x * x).sum::<f64>().sqrt();
-                if after.is_finite() && tc.count == s.count && after <= before {
+                if after.is_finite() && tc.count == count && after <= before {
                     // dual update towards the central path of the current mu, then a
                     // smaller mu from the complementarity that was reached
                     let v = trial.shape.to_array();
@@ -377,15 +365,14 @@ pub fn solve_on(
                         s.z_upper[k] = (s.mu / du).max(1e-300);
                         gap += s.z_lower[k] * dl + s.z_upper[k] * du;
                     }
-                    let relative = (s.cost - tc.cost).abs() / s.cost.max(1e-300);
+                    let relative = (cost - tc.cost).abs() / cost.max(1e-300);
                     s.c = trial;
-                    s.cost = tc.cost;
                     s.mu = (0.1 * gap / 12.0).max(1e-14 * tc.cost.max(1e-300));
                     s.normal = tc;
                     s.damping = (s.damping / 3.0).max(1e-9);
                     s.log.push(LogLine {
                         iteration: s.iterations,
-                        cost: s.cost,
+                        cost: s.normal.cost,
                         mu: s.mu,
                         damping: s.damping,
                         step: step_norm,
@@ -419,8 +406,8 @@ pub fn solve_on(
         .into_iter()
         .map(|s| Solution {
             candidate: s.c,
-            cost: s.cost,
-            count: s.count,
+            cost: s.normal.cost,
+            count: s.normal.count,
             iterations: s.iterations,
             stop: s.stop.unwrap_or(Stop::IterationCap),
             log: s.log,
