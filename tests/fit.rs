@@ -119,7 +119,7 @@ fn partial_successes(method: supertoroid::fit::Method) -> usize {
 }
 
 /// A regression floor at the level measured when this was written (4 of 12; 5 since the
-/// runner-up and bounds changes). The target of issue 4 is 95% on partial clouds with
+/// runner-up and bounds changes; 6 since the robust refinement). The target of issue 4 is 95% on partial clouds with
 /// outliers; this is far from it. The paper's procedure is the baseline to beat.
 #[test]
 fn partial_clouds_regression_floor() {
@@ -127,7 +127,7 @@ fn partial_clouds_regression_floor() {
     let paper = partial_successes(supertoroid::fit::Method::Paper);
     eprintln!("partial clouds recovered: {successes} of 12; paper method: {paper} of 12");
     assert!(
-        successes >= 4,
+        successes >= 5,
         "only {successes} of 12 partial clouds recovered"
     );
     assert!(successes >= paper, "default {successes} < paper {paper}");
@@ -192,6 +192,17 @@ fn bad_clouds_are_rejected_with_a_reason() {
         fit(&mut ev, &same, &o).unwrap_err(),
         FitError::Degenerate(_)
     ));
+    let good = make_case(1, false, 0.0, 0.0).points;
+    for refine_scale in [-1.0, f64::NAN, f64::INFINITY] {
+        let bad = FitOptions {
+            refine_scale,
+            ..Default::default()
+        };
+        assert!(matches!(
+            fit(&mut ev, &good, &bad).unwrap_err(),
+            FitError::InvalidOption(m) if m.contains("refine scale")
+        ));
+    }
 }
 
 #[test]
@@ -468,4 +479,43 @@ fn true_shapes_are_supported_by_their_clouds_and_stretched_ones_are_not() {
             "seed {seed}: a3 stretched reaches only {reach:.2}"
         );
     }
+}
+
+/// The robust refinement at the end of stage 2 (a Cauchy loss scaled by the cloud's own
+/// residual spread): on the suite's 20 noise-free single-view clouds with 5-10%
+/// outliers, the fit with it must recover clearly more shapes than without it (measured
+/// when written: 16 of 20 with it, 11 without).
+#[test]
+fn the_robust_refinement_shakes_off_outliers_on_one_sided_views() {
+    use supertoroid::bench::synthetic::{DEFAULT_SEED, category};
+    let mut evaluator = CpuEvaluator::new();
+    let (mut cases, mut with, mut without) = (0, 0, 0);
+    for i in 0..180 {
+        let (partial, noise, outliers) = category(i);
+        if !partial || noise > 0.0 || outliers == 0.0 {
+            continue;
+        }
+        let seed = DEFAULT_SEED + i as u64;
+        let case = make_case(seed, partial, noise, outliers);
+        let mut success = |refine_scale: f64| {
+            let options = FitOptions {
+                seed,
+                refine_scale,
+                ..Default::default()
+            };
+            let report = fit(&mut evaluator, &case.points, &options).unwrap();
+            compare(
+                (&case.shape, &case.pose),
+                (&report.fitted.0, &report.fitted.1),
+            )
+            .success() as usize
+        };
+        with += success(FitOptions::default().refine_scale);
+        without += success(0.0);
+        cases += 1;
+    }
+    eprintln!("{with} of {cases} recovered with the refinement, {without} without");
+    assert_eq!(cases, 20);
+    assert!(with >= 15, "only {with} of 20 recovered with the refinement");
+    assert!(with >= without + 3, "refinement {with} vs none {without}");
 }

@@ -85,6 +85,10 @@ pub struct FitOptions {
     pub runner_up_ratio: f64,
     /// Huber threshold of both stages, as a fraction of the cloud's RMS radius
     pub huber: f64,
+    /// the chosen stage-2 solution is refined under a Cauchy loss whose scale is this
+    /// many robust residual scales (1.4826 · median |r| at the solution); 0 turns the
+    /// refinement off. See [`refine_robustly`].
+    pub refine_scale: f64,
     pub eps_min: f64,
     pub eps_max: f64,
     /// prior: the hole axis in world coordinates, if known (e.g. "on a table, hole up")
@@ -106,6 +110,7 @@ impl Default for FitOptions {
             a3_penalty: 0.0,
             runner_up_ratio: 1.3,
             huber: 0.05,
+            refine_scale: 1.5,
             eps_min: 0.1,
             eps_max: 2.0,
             known_axis: None,
@@ -351,9 +356,17 @@ struct Prepared<'a> {
     hole_preference: f64,
     /// solutions that [`overreach`] beyond this rank below every one that does not
     max_overreach: Option<f64>,
+    /// Cauchy scale of the final refinement in robust residual scales, if it runs
+    refine_scale: Option<f64>,
 }
 
 fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitError> {
+    if !(o.refine_scale.is_finite() && o.refine_scale >= 0.0) {
+        return Err(FitError::InvalidOption(format!(
+            "refine scale must be finite and >= 0, got {}",
+            o.refine_scale
+        )));
+    }
     if o.stage1_points < MIN_POINTS || o.stage2_points < MIN_POINTS {
         return Err(FitError::InvalidOption(format!(
             "points per stage must be at least {MIN_POINTS}"
@@ -506,6 +519,7 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
         runner_up_ratio: (!paper).then_some(o.runner_up_ratio),
         hole_preference,
         max_overreach: (!paper).then_some(MAX_OVERREACH),
+        refine_scale: (!paper && o.refine_scale > 0.0).then_some(o.refine_scale),
     })
 }
 
@@ -557,19 +571,13 @@ fn fit_group(
         .map(|(c, &cloud)| group[cloud].1.supported_bounds(c))
         .collect();
     let stage2 = solve_on(evaluator, &candidates, &sets, &stage2_bounds, &opts2)?;
-    let t_total = start.elapsed();
 
-    let timing = Timing {
-        stage1: t1.as_secs_f64() * 1e3,
-        stage2: (t_total - t1).as_secs_f64() * 1e3,
-        total: t_total.as_secs_f64() * 1e3,
-    };
-    Ok(group
+    // between finalists, the lower cost wins, a wider hole breaking near-ties and a
+    // surface the points support beats one that overreaches them
+    let chosen: Vec<Solution> = group
         .iter()
         .enumerate()
         .map(|(cloud, (_, p))| {
-            // between finalists, the lower cost wins, a wider hole breaking near-ties
-            // and a surface the points support beats one that overreaches them
             let merit = |s: &Solution| {
                 (
                     p.overreaches(&s.candidate, &p.stage2_pts),
@@ -583,9 +591,85 @@ fn fit_group(
                 .map(|(sol, _)| (merit(sol), sol))
                 .min_by(|(a, _), (b, _)| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)))
                 .expect("one finalist at least");
+            best.clone()
+        })
+        .collect();
+    let chosen = refine_robustly(evaluator, group, chosen, &opts2)?;
+    let t_total = start.elapsed();
+
+    let timing = Timing {
+        stage1: t1.as_secs_f64() * 1e3,
+        stage2: (t_total - t1).as_secs_f64() * 1e3,
+        total: t_total.as_secs_f64() * 1e3,
+    };
+    Ok(group
+        .iter()
+        .zip(&chosen)
+        .enumerate()
+        .map(|(cloud, ((_, p), best))| {
             report(p, best, timing.clone(), stage1_iterations[cloud], evaluator)
         })
         .collect())
+}
+
+/// The end of stage 2: each cloud's chosen solution solved again under a Cauchy loss
+/// whose scale is `refine_scale` robust residual scales (sigma = 1.4826 · median |r| of
+/// the stage-2 sample at the solution). The Huber loss of the stages still lets
+/// outliers pull with a constant force; the Cauchy weight 1/(1 + (r/k)^2) all but drops
+/// a point ten scales off, and k follows the cloud's own noise. Measured on the
+/// ground-truth suite (180 cases, three seed sets): 316 -> 339 successes of 540, partial
+/// clouds with outliers 27-35% -> 37-42%; k = 1 gave 343 (30 iterations), k = 2 gave 335.
+///
+/// The point sets are the stage-2 samples (still uploaded). Each cloud has its own loss
+/// scale, so each is solved in its own call; the refined solution keeps the box of
+/// [`Prepared::supported_bounds`], and its iterations count as stage 2's.
+fn refine_robustly(
+    evaluator: &mut dyn Evaluator,
+    group: &[(usize, Prepared)],
+    chosen: Vec<Solution>,
+    opts2: &SolverOptions,
+) -> Result<Vec<Solution>, FitError> {
+    if group.iter().all(|(_, p)| p.refine_scale.is_none()) {
+        return Ok(chosen);
+    }
+    let candidates: Vec<Candidate> = chosen.iter().map(|s| s.candidate).collect();
+    let sets: Vec<usize> = (0..chosen.len()).collect();
+    let residuals = evaluator.residuals_on(&candidates, &sets)?;
+    let mut offset = 0;
+    let mut refined = Vec::with_capacity(chosen.len());
+    for (cloud, ((_, p), solution)) in group.iter().zip(chosen).enumerate() {
+        let n = p.stage2_pts.len();
+        let mut magnitudes: Vec<f64> = residuals[offset..offset + n]
+            .iter()
+            .map(|r| r.abs())
+            .collect();
+        offset += n;
+        let Some(k) = p.refine_scale else {
+            refined.push(solution);
+            continue;
+        };
+        let median = *magnitudes
+            .select_nth_unstable_by(n / 2, f64::total_cmp)
+            .1;
+        // a floor for clouds that lie on the surface exactly (normalised units: 1e-4 of
+        // the cloud's RMS radius)
+        let sigma = (1.4826 * median).max(1e-4);
+        let options = SolverOptions {
+            loss: Loss::Cauchy(k * sigma),
+            // (the suite's 540 cases: 336 successes at 8, 339 at 15, 342 at 30; the
+            // paper clouds' median fit time 7.9, 8.5, 9.5 ms)
+            max_iterations: 15,
+            ..*opts2
+        };
+        let bounds = p.supported_bounds(&solution.candidate);
+        let mut r = solve_on(evaluator, &[solution.candidate], &[cloud], &[bounds], &options)?;
+        let r = r.pop().expect("one solution per start");
+        refined.push(Solution {
+            iterations: solution.iterations + r.iterations,
+            ..r
+        });
+    }
+    Ok(refined)
 }
 
 /// How far a candidate's sizes reach beyond the cloud: the largest ratio, over the
