@@ -44,7 +44,9 @@ struct Candidate {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
-// xyz, w = 1 for a real point (0 for padding)
+// xyz; w = 1 for a surface point, 2 for a free-space point (known to lie outside the
+// object: its residual is min(r, 0), and it adds to the cost but not to the count), 0 for
+// padding
 @group(0) @binding(1) var<storage, read> points: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> candidates: array<Candidate>;
 @group(0) @binding(3) var<storage, read_write> out: array<f32>;
@@ -182,6 +184,14 @@ fn canonical(c: Candidate, p: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(dot(c.c0.xyz, d), dot(c.c1.xyz, d), dot(c.c2.xyz, d));
 }
 
+// The residual of a point of kind w (see `points`): a free-space point counts only inside.
+fn residual_of(r: f32, w: f32) -> f32 {
+    if (w == 2.0) {
+        return min(r, 0.0);
+    }
+    return r;
+}
+
 // Robust loss: (cost rho(r), IRLS weight rho'(r)/r).
 fn loss_of(r: f32) -> vec2<f32> {
     let k = params.loss_scale;
@@ -217,8 +227,9 @@ fn residuals(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (i >= c.count) {
         return;
     }
-    let ev = meridian(canonical(c, points[c.first + i].xyz), c.a, c.e, false);
-    out[k * params.n_points + i] = ev.r;
+    let p = points[c.first + i];
+    let ev = meridian(canonical(c, p.xyz), c.a, c.e, false);
+    out[k * params.n_points + i] = residual_of(ev.r, p.w);
 }
 
 // ---- normal equations: out[(k * groups_x + gx) * (NE + 1) + j] ----------------------
@@ -252,10 +263,12 @@ fn normal_equations(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workg
         for (var a = 0u; a < NJ; a++) {
             ok = ok && finite(jac[a]);
         }
-        if (!ok) {
+        let r = residual_of(ev.r, p.w);
+        // a free-space point outside the candidate has no residual and no gradient
+        if (!ok || (p.w == 2.0 && r == 0.0)) {
             continue;
         }
-        let lw = loss_of(ev.r);
+        let lw = loss_of(r);
         var idx = 0u;
         for (var a = 0u; a < NJ; a++) {
             let wa = lw.y * jac[a];
@@ -263,10 +276,10 @@ fn normal_equations(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workg
                 acc[idx] += wa * jac[b];
                 idx++;
             }
-            acc[78u + a] += wa * ev.r;
+            acc[78u + a] += wa * r;
         }
         acc[90] += lw.x;
-        acc[91] += 1.0;
+        acc[91] += select(1.0, 0.0, p.w == 2.0);
     }
     let base = lid.x * NE;
     for (var j = 0u; j < NE; j++) {
@@ -306,7 +319,7 @@ fn costs(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wi
         }
         let ev = meridian(canonical(c, p.xyz), c.a, c.e, false);
         if (finite(ev.r)) {
-            acc += vec2<f32>(loss_of(ev.r).x, 1.0);
+            acc += vec2<f32>(loss_of(residual_of(ev.r, p.w)).x, select(1.0, 0.0, p.w == 2.0));
         }
     }
     partial_cost[lid.x] = acc;

@@ -114,6 +114,10 @@ pub enum BenchCommand {
         cases: usize,
         #[arg(long, default_value_t = crate::bench::synthetic::DEFAULT_SEED)]
         seed: u64,
+        /// do not tell the fit where the camera of a single-view case was (by default it
+        /// gets the camera's position, as a depth frame gives it)
+        #[arg(long)]
+        no_viewpoint: bool,
     },
     /// Time per solver iteration against points and candidates, per backend.
     Scaling {
@@ -197,6 +201,10 @@ pub struct FitArgs {
     /// tell how thick an object is
     #[arg(long)]
     pub a3: Option<f64>,
+    /// where the depth sensor was, x,y,z in the cloud's frame (0,0,0 for a cloud in the
+    /// camera's own frame): the fit keeps solid out of the space the sensor saw through
+    #[arg(long, allow_hyphen_values = true)]
+    pub viewpoint: Option<String>,
     /// also write the fitted surface as a PLY mesh with normals
     #[arg(long)]
     pub mesh: Option<PathBuf>,
@@ -394,12 +402,19 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         )),
         None => None,
     };
+    let viewpoint = match &args.viewpoint {
+        Some(v) => Some(glam::DVec3::from_array(
+            crate::model::parse_floats::<3>(v, "viewpoint x,y,z").map_err(Failure::input)?,
+        )),
+        None => None,
+    };
     let options = crate::fit::FitOptions {
         seed: args.seed,
         stage1_points: args.stage1_points,
         stage2_points: args.stage2_points,
         known_axis,
         known_a3: args.a3,
+        viewpoint,
         method: args.method,
         ..Default::default()
     };
@@ -538,9 +553,20 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
                 .map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }
-        BenchCommand::Synthetic { cases, seed } => {
-            let r = crate::bench::synthetic::run(*cases, *seed, backend, &options, render.as_ref())
-                .map_err(Failure::input)?;
+        BenchCommand::Synthetic {
+            cases,
+            seed,
+            no_viewpoint,
+        } => {
+            let r = crate::bench::synthetic::run(
+                *cases,
+                *seed,
+                !*no_viewpoint,
+                backend,
+                &options,
+                render.as_ref(),
+            )
+            .map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }
         BenchCommand::Scaling {

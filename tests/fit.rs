@@ -203,6 +203,14 @@ fn bad_clouds_are_rejected_with_a_reason() {
             FitError::InvalidOption(m) if m.contains("refine scale")
         ));
     }
+    let nowhere = FitOptions {
+        viewpoint: Some(DVec3::new(0.0, f64::INFINITY, 0.0)),
+        ..Default::default()
+    };
+    assert!(matches!(
+        fit(&mut ev, &good, &nowhere).unwrap_err(),
+        FitError::InvalidOption(m) if m.contains("viewpoint")
+    ));
 }
 
 #[test]
@@ -283,6 +291,19 @@ fn cli_fit_prints_every_documented_field() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("planar"));
+    // the sensor's position: accepted as x,y,z, named when malformed
+    for (viewpoint, ok) in [("0,-1,0.5", true), ("0,1", false), ("0,nan,1", false)] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_supertoroid"))
+            .args(["fit", "--backend", "cpu", "--viewpoint", viewpoint])
+            .arg(&file)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.success(), ok, "--viewpoint {viewpoint}");
+        if !ok {
+            assert_eq!(out.status.code(), Some(2));
+            assert!(String::from_utf8_lossy(&out.stderr).contains("viewpoint"));
+        }
+    }
 }
 
 /// A flat washer seen from below (seed 1019): the view cannot tell its thickness, and the
@@ -516,6 +537,48 @@ fn the_robust_refinement_shakes_off_outliers_on_one_sided_views() {
     }
     eprintln!("{with} of {cases} recovered with the refinement, {without} without");
     assert_eq!(cases, 20);
-    assert!(with >= 15, "only {with} of 20 recovered with the refinement");
+    assert!(
+        with >= 15,
+        "only {with} of 20 recovered with the refinement"
+    );
     assert!(with >= without + 3, "refinement {with} vs none {without}");
+}
+
+/// A depth sensor saw through the space in front of its points: told where the camera
+/// was, the fit keeps solid out of it. On the suite's 60 single-view clouds with noise
+/// <= 1% the fit with the viewpoint must recover more shapes than without it (measured
+/// when written: 37 with it, 32 without; the targets of issue 4 are far above either).
+#[test]
+fn the_camera_position_helps_single_views() {
+    use supertoroid::bench::synthetic::{DEFAULT_SEED, category};
+    let mut evaluator = CpuEvaluator::new();
+    let (mut cases, mut with, mut without) = (0, 0, 0);
+    for i in 0..180 {
+        let (partial, noise, outliers) = category(i);
+        if !partial || noise > 0.011 {
+            continue;
+        }
+        let seed = DEFAULT_SEED + i as u64;
+        let case = make_case(seed, partial, noise, outliers);
+        assert!(case.viewpoint.is_some());
+        let mut success = |viewpoint: Option<DVec3>| {
+            let options = FitOptions {
+                seed,
+                viewpoint,
+                ..Default::default()
+            };
+            let report = fit(&mut evaluator, &case.points, &options).unwrap();
+            compare(
+                (&case.shape, &case.pose),
+                (&report.fitted.0, &report.fitted.1),
+            )
+            .success() as usize
+        };
+        with += success(case.viewpoint);
+        without += success(None);
+        cases += 1;
+    }
+    eprintln!("{with} of {cases} recovered with the viewpoint, {without} without");
+    assert_eq!(cases, 60);
+    assert!(with >= without + 4, "viewpoint {with} vs none {without}");
 }

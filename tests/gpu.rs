@@ -440,3 +440,128 @@ fn auto_fits_small_samples_on_the_cpu() {
         assert_eq!(evaluator.kind(), "cpu");
     }
 }
+
+/// Free-space points (`PointSet::free_space`): outside the candidate they add nothing,
+/// inside they add rho(r) of their (negative) meridian distance, never to the count, and
+/// they have no residual entries; the WGSL kernels agree with the f64 reference.
+#[test]
+fn free_space_points_count_only_inside_the_candidate() {
+    let mut rng = synth::rng(41);
+    let shape = Shape::new(0.8, 0.6, 0.4, 1.8, 0.7, 1.1);
+    let pose = random_pose(&mut rng);
+    let surface = synth::sample_surface(&shape, &pose, 700, &mut rng);
+    // points around the object, split by the truth's inside-outside function
+    let around: Vec<DVec3> = (0..600)
+        .map(|_| {
+            let half = shape.half_extents() * 1.2;
+            pose.to_world(DVec3::new(
+                rng.random_range(-half.x..half.x),
+                rng.random_range(-half.y..half.y),
+                rng.random_range(-half.z..half.z),
+            ))
+        })
+        .collect();
+    let inside_outside = |p: &DVec3| shape.inside_outside(pose.to_canonical(*p));
+    let outside: Vec<DVec3> = around
+        .iter()
+        .copied()
+        .filter(|p| inside_outside(p) > 1.0)
+        .collect();
+    let inside: Vec<DVec3> = around
+        .iter()
+        .copied()
+        .filter(|p| inside_outside(p) < 1.0)
+        .collect();
+    assert!(
+        outside.len() > 100 && inside.len() > 50,
+        "{} / {}",
+        outside.len(),
+        inside.len()
+    );
+
+    let truth = Candidate { shape, pose };
+    let loss = Loss::Huber(0.05);
+    let mut cpu = CpuEvaluator::new();
+    cpu.set_points(&surface).unwrap();
+    let alone = cpu.normal_equations(&[truth], loss).unwrap().remove(0);
+
+    // outside: exactly nothing added
+    cpu.set_point_sets_with_free_space(&[PointSet {
+        surface: &surface,
+        free_space: &outside,
+    }])
+    .unwrap();
+    let with_outside = cpu.normal_equations(&[truth], loss).unwrap().remove(0);
+    assert_eq!(with_outside.jtj, alone.jtj);
+    assert_eq!(with_outside.jtr, alone.jtr);
+    assert_eq!(
+        (with_outside.cost, with_outside.count),
+        (alone.cost, alone.count)
+    );
+
+    // inside: each adds rho of its meridian distance, none adds to the count
+    cpu.set_point_sets_with_free_space(&[PointSet {
+        surface: &surface,
+        free_space: &inside,
+    }])
+    .unwrap();
+    let with_inside = cpu.normal_equations(&[truth], loss).unwrap().remove(0);
+    let expected: f64 = inside
+        .iter()
+        .map(|p| {
+            loss.eval(meridian_distance(&shape, pose.to_canonical(*p)).signed)
+                .0
+        })
+        .sum();
+    assert!(expected > 0.0);
+    assert!(
+        (with_inside.cost - alone.cost - expected).abs() <= 1e-9 * expected,
+        "{} vs {}",
+        with_inside.cost - alone.cost,
+        expected
+    );
+    assert_eq!(with_inside.count, surface.len() as u64);
+    assert_eq!(cpu.residuals(&[truth]).unwrap().len(), surface.len());
+
+    // the GPU kernels, on a mixed set and a start away from the truth
+    let mut gpu = GpuEvaluator::new(context());
+    let sets = [
+        PointSet {
+            surface: &surface,
+            free_space: &around,
+        },
+        PointSet::surface(&surface[..150]),
+    ];
+    gpu.set_point_sets_with_free_space(&sets).unwrap();
+    cpu.set_point_sets_with_free_space(&sets).unwrap();
+    let start = Candidate {
+        shape: Shape {
+            a1: shape.a1 * 1.15,
+            a3: shape.a3 * 1.2,
+            ..shape
+        },
+        pose,
+    };
+    let batch = [start, truth, start];
+    let which = [0, 0, 1];
+    let g = gpu.normal_equations_on(&batch, &which, loss).unwrap();
+    let c = cpu.normal_equations_on(&batch, &which, loss).unwrap();
+    assert_eq!(c[0].count, surface.len() as u64);
+    compare_normal_equations(&g[0], &c[0], 2e-3);
+    compare_normal_equations(&g[2], &c[2], 2e-3);
+    assert_eq!(g[1].count, c[1].count);
+    let gc = gpu.costs_on(&batch, &which, loss).unwrap();
+    let cc = cpu.costs_on(&batch, &which, loss).unwrap();
+    for (k, (a, b)) in gc.iter().zip(&cc).enumerate() {
+        assert_eq!(a.count, b.count, "candidate {k}");
+        assert!(
+            (a.cost - b.cost).abs() <= 2e-3 * b.cost.max(1e-3),
+            "candidate {k}: {} vs {}",
+            a.cost,
+            b.cost
+        );
+    }
+    let gr = gpu.residuals_on(&batch, &which).unwrap();
+    assert_eq!(gr.len(), 2 * surface.len() + 150);
+    assert_eq!(cpu.residuals_on(&batch, &which).unwrap().len(), gr.len());
+}

@@ -26,7 +26,7 @@ impl Evaluator for Mock {
     fn device_name(&self) -> String {
         "mock".into()
     }
-    fn set_point_sets(&mut self, _: &[&[DVec3]]) -> Result<(), EvalError> {
+    fn set_point_sets_with_free_space(&mut self, _: &[PointSet]) -> Result<(), EvalError> {
         Ok(())
     }
     fn normal_equations_on(

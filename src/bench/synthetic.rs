@@ -60,6 +60,8 @@ pub struct ErrorStats {
 pub struct SyntheticReport {
     pub machine: Machine,
     pub backend: String,
+    /// whether single-view fits were told the camera's position
+    pub viewpoint_given: bool,
     pub cases: Vec<Case>,
     pub categories: Vec<Category>,
     pub overall_rate: f64,
@@ -90,9 +92,11 @@ fn rate<'a>(cases: impl Iterator<Item = &'a Case>) -> f64 {
 }
 
 /// With `render`, draws up to six failed cases (cloud and fit; the truth is in the CSV).
+/// With `use_viewpoint`, a single-view case's fit is told where its camera was.
 pub fn run(
     cases: usize,
     seed: u64,
+    use_viewpoint: bool,
     backend: Backend,
     base: &FitOptions,
     render: Option<&super::RenderTarget>,
@@ -110,6 +114,7 @@ pub fn run(
         let case = make_case(case_seed, partial, noise, outliers);
         let options = FitOptions {
             seed: case_seed,
+            viewpoint: case.viewpoint.filter(|_| use_viewpoint),
             ..base.clone()
         };
         let report = fit(evaluator.as_mut(), &case.points, &options)
@@ -166,6 +171,7 @@ pub fn run(
     Ok(SyntheticReport {
         machine: Machine::probe(),
         backend: evaluator.device_name(),
+        viewpoint_given: use_viewpoint,
         overall_rate: rate(out.iter()),
         full_rate: rate(full.iter().copied()),
         partial_rate: rate(partial.iter().copied()),
@@ -244,9 +250,14 @@ impl Report for SyntheticReport {
         let mut md = String::from("# Ground-truth suite\n\n");
         md += &self.machine.markdown();
         md += &format!(
-            "Evaluator: {}. {} cases. Success: overall {:.1}%, full clouds {:.1}%, single-view partial {:.1}%, partial with outliers {:.1}%.\n\n",
+            "Evaluator: {}. {} cases (single views {}). Success: overall {:.1}%, full clouds {:.1}%, single-view partial {:.1}%, partial with outliers {:.1}%.\n\n",
             self.backend,
             self.cases.len(),
+            if self.viewpoint_given {
+                "with the camera's position"
+            } else {
+                "without the camera's position"
+            },
             100.0 * self.overall_rate,
             100.0 * self.full_rate,
             100.0 * self.partial_rate,

@@ -1,4 +1,7 @@
-use super::{Candidate, Cost, EvalError, Evaluator, Loss, NUM_PARAMS, NormalEquations, check_sets};
+use super::{
+    Candidate, Cost, EvalError, Evaluator, Loss, NUM_PARAMS, NormalEquations, PointSet, check_sets,
+    point_residual,
+};
 use crate::model::{meridian_distance, meridian_residual_with_gradient};
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -6,10 +9,10 @@ use rayon::prelude::*;
 /// The f64 reference evaluator, parallel over points with rayon.
 #[derive(Default)]
 pub struct CpuEvaluator {
-    /// all point sets, one after another
+    /// all point sets, one after another, each its surface points then its free-space ones
     points: Vec<DVec3>,
-    /// (first, count) of each set in `points`
-    sets: Vec<(usize, usize)>,
+    /// (first, surface count, free-space count) of each set in `points`
+    sets: Vec<(usize, usize, usize)>,
 }
 
 impl CpuEvaluator {
@@ -37,10 +40,10 @@ pub fn jacobian_row(c: &Candidate, rotation: &DMat3, p: DVec3) -> (f64, [f64; NU
 const CHUNK: usize = 256;
 
 impl CpuEvaluator {
-    /// The points of set `s`.
+    /// The points of set `s`, surface then free space.
     fn set(&self, s: usize) -> &[DVec3] {
-        let (first, count) = self.sets[s];
-        &self.points[first..first + count]
+        let (first, surface, free) = self.sets[s];
+        &self.points[first..first + surface + free]
     }
 
     /// `work(candidate, chunk)` over every (candidate, chunk of its set) pair in
@@ -49,22 +52,29 @@ impl CpuEvaluator {
     /// callers sum them in that order: the same sums whatever the thread schedule or the
     /// other candidates of the batch, so a seed always gives the same fit, alone or in a
     /// batch of clouds.
+    /// `work` gets the candidate, the chunk, and how many of the chunk's leading points
+    /// are surface points (the rest are free-space points).
     fn per_chunk<T: Send>(
         &self,
         sets: &[usize],
-        work: impl Fn(usize, &[DVec3]) -> T + Sync,
+        work: impl Fn(usize, &[DVec3], usize) -> T + Sync,
     ) -> Vec<Vec<T>> {
         let items: Vec<(usize, usize)> = sets
             .iter()
             .enumerate()
-            .flat_map(|(k, &s)| (0..self.sets[s].1.div_ceil(CHUNK)).map(move |j| (k, j)))
+            .flat_map(|(k, &s)| {
+                let (_, surface, free) = self.sets[s];
+                (0..(surface + free).div_ceil(CHUNK)).map(move |j| (k, j))
+            })
             .collect();
         let results: Vec<(usize, T)> = items
             .into_par_iter()
             .map(|(k, j)| {
                 let set = self.set(sets[k]);
-                let end = ((j + 1) * CHUNK).min(set.len());
-                (k, work(k, &set[j * CHUNK..end]))
+                let surface = self.sets[sets[k]].1;
+                let (start, end) = (j * CHUNK, ((j + 1) * CHUNK).min(set.len()));
+                let surface_in_chunk = surface.clamp(start, end) - start;
+                (k, work(k, &set[start..end], surface_in_chunk))
             })
             .collect();
         let mut out: Vec<Vec<T>> = (0..sets.len()).map(|_| Vec::new()).collect();
@@ -76,6 +86,7 @@ impl CpuEvaluator {
     }
 
     fn check(&self, candidates: usize, sets: &[usize]) -> Result<(), EvalError> {
+        // a set needs surface points: free space alone fits nothing
         let sizes: Vec<usize> = self.sets.iter().map(|s| s.1).collect();
         check_sets(candidates, sets, &sizes)
     }
@@ -90,12 +101,14 @@ impl Evaluator for CpuEvaluator {
         format!("cpu (f64, {} threads)", rayon::current_num_threads())
     }
 
-    fn set_point_sets(&mut self, sets: &[&[DVec3]]) -> Result<(), EvalError> {
+    fn set_point_sets_with_free_space(&mut self, sets: &[PointSet]) -> Result<(), EvalError> {
         self.points.clear();
         self.sets.clear();
         for set in sets {
-            self.sets.push((self.points.len(), set.len()));
-            self.points.extend_from_slice(set);
+            self.sets
+                .push((self.points.len(), set.surface.len(), set.free_space.len()));
+            self.points.extend_from_slice(set.surface);
+            self.points.extend_from_slice(set.free_space);
         }
         Ok(())
     }
@@ -108,12 +121,17 @@ impl Evaluator for CpuEvaluator {
     ) -> Result<Vec<NormalEquations>, EvalError> {
         self.check(candidates.len(), sets)?;
         let rotations: Vec<DMat3> = candidates.iter().map(|c| c.pose.matrix()).collect();
-        let partials = self.per_chunk(sets, |k, chunk| {
+        let partials = self.per_chunk(sets, |k, chunk, surface| {
             let (c, rotation) = (&candidates[k], &rotations[k]);
             let mut ne = NormalEquations::zero();
-            for p in chunk {
+            for (i, p) in chunk.iter().enumerate() {
+                let free_space = i >= surface;
                 let (r, row) = jacobian_row(c, rotation, *p);
                 if !r.is_finite() || row.iter().any(|x| !x.is_finite()) {
+                    continue;
+                }
+                let r = point_residual(r, free_space);
+                if free_space && r == 0.0 {
                     continue;
                 }
                 let (rho, w) = loss.eval(r);
@@ -125,7 +143,7 @@ impl Evaluator for CpuEvaluator {
                     ne.jtr[a] += wa * r;
                 }
                 ne.cost += rho;
-                ne.count += 1;
+                ne.count += u64::from(!free_space);
             }
             ne
         });
@@ -164,16 +182,22 @@ impl Evaluator for CpuEvaluator {
             .iter()
             .map(|c| c.pose.rotation.inverse())
             .collect();
-        let partials = self.per_chunk(sets, |k, chunk| {
+        let partials = self.per_chunk(sets, |k, chunk, surface| {
             let c = &candidates[k];
-            chunk.iter().fold((0.0, 0u64), |(cost, count), p| {
-                let r = meridian_distance(&c.shape, inverses[k] * (*p - c.pose.translation)).signed;
-                if r.is_finite() {
-                    (cost + loss.eval(r).0, count + 1)
-                } else {
-                    (cost, count)
-                }
-            })
+            chunk
+                .iter()
+                .enumerate()
+                .fold((0.0, 0u64), |(cost, count), (i, p)| {
+                    let free_space = i >= surface;
+                    let r =
+                        meridian_distance(&c.shape, inverses[k] * (*p - c.pose.translation)).signed;
+                    if r.is_finite() {
+                        let r = point_residual(r, free_space);
+                        (cost + loss.eval(r).0, count + u64::from(!free_space))
+                    } else {
+                        (cost, count)
+                    }
+                })
         });
         Ok(partials
             .iter()
@@ -193,8 +217,9 @@ impl Evaluator for CpuEvaluator {
         let mut out = Vec::new();
         for (c, &s) in candidates.iter().zip(sets) {
             let inverse = c.pose.rotation.inverse();
+            let surface = &self.set(s)[..self.sets[s].1];
             out.par_extend(
-                self.set(s).par_iter().map(|p| {
+                surface.par_iter().map(|p| {
                     meridian_distance(&c.shape, inverse * (*p - c.pose.translation)).signed
                 }),
             );

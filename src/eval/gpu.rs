@@ -4,9 +4,9 @@
 //! them only when a larger cloud or batch arrives.
 
 use super::{
-    Candidate, Cost, EvalError, Evaluator, Loss, NUM_PARAMS, NUM_UPPER, NormalEquations, check_sets,
+    Candidate, Cost, EvalError, Evaluator, Loss, NUM_PARAMS, NUM_UPPER, NormalEquations, PointSet,
+    check_sets,
 };
-use glam::DVec3;
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// The kernel source, checked by naga in the tests and compiled by wgpu at start-up.
@@ -294,8 +294,9 @@ fn ensure(
 /// The WGSL evaluator. Holds its own buffers; shares the process's [`GpuContext`].
 pub struct GpuEvaluator {
     ctx: Arc<GpuContext>,
-    /// (first, count) of each uploaded point set in the points buffer
-    sets: Vec<(u32, u32)>,
+    /// (first, count, surface count) of each uploaded point set in the points buffer:
+    /// its surface points, then its free-space points (w = 2)
+    sets: Vec<(u32, u32, u32)>,
     params: wgpu::Buffer,
     points: Option<Grown>,
     candidates: Option<Grown>,
@@ -349,8 +350,10 @@ impl GpuEvaluator {
         candidates: &[Candidate],
         sets: &[usize],
     ) -> Result<usize, EvalError> {
+        // a set needs surface points: free space alone fits nothing
+        let surface: Vec<usize> = self.sets.iter().map(|s| s.2 as usize).collect();
+        check_sets(candidates.len(), sets, &surface)?;
         let sizes: Vec<usize> = self.sets.iter().map(|s| s.1 as usize).collect();
-        check_sets(candidates.len(), sets, &sizes)?;
         let max_y = self.ctx.limits.max_compute_workgroups_per_dimension as usize;
         if candidates.is_empty() || candidates.len() > max_y {
             return Err(EvalError::TooLarge(format!(
@@ -363,7 +366,7 @@ impl GpuEvaluator {
             candidates
                 .iter()
                 .zip(sets)
-                .map(|(c, &s)| GpuCandidate::from(c, self.sets[s])),
+                .map(|(c, &s)| GpuCandidate::from(c, (self.sets[s].0, self.sets[s].1))),
         );
         let bytes = std::mem::size_of_val(self.scratch.as_slice()) as u64;
         if ensure(
@@ -550,18 +553,25 @@ impl Evaluator for GpuEvaluator {
         self.ctx.adapter_name()
     }
 
-    fn set_point_sets(&mut self, sets: &[&[DVec3]]) -> Result<(), EvalError> {
-        let total: usize = sets.iter().map(|s| s.len()).sum();
+    fn set_point_sets_with_free_space(&mut self, sets: &[PointSet]) -> Result<(), EvalError> {
+        let total: usize = sets
+            .iter()
+            .map(|s| s.surface.len() + s.free_space.len())
+            .sum();
         let bytes = (total * 16) as u64;
         if bytes > self.ctx.limits.max_storage_buffer_binding_size as u64
             || total > u32::MAX as usize / 2
         {
             return Err(EvalError::TooLarge(format!("{total} points")));
         }
+        // w: 1 a surface point, 2 a free-space point (0 is padding)
         let data: Vec<[f32; 4]> = sets
             .iter()
-            .flat_map(|set| set.iter())
-            .map(|p| [p.x as f32, p.y as f32, p.z as f32, 1.0])
+            .flat_map(|set| {
+                let surface = set.surface.iter().map(|p| (p, 1.0));
+                surface.chain(set.free_space.iter().map(|p| (p, 2.0)))
+            })
+            .map(|(p, w)| [p.x as f32, p.y as f32, p.z as f32, w])
             .collect();
         if ensure(
             &self.ctx,
@@ -582,8 +592,9 @@ impl Evaluator for GpuEvaluator {
         self.sets.clear();
         let mut first = 0u32;
         for set in sets {
-            self.sets.push((first, set.len() as u32));
-            first += set.len() as u32;
+            let count = (set.surface.len() + set.free_space.len()) as u32;
+            self.sets.push((first, count, set.surface.len() as u32));
+            first += count;
         }
         Ok(())
     }
@@ -640,13 +651,14 @@ impl Evaluator for GpuEvaluator {
                 "{longest} points for one residual dispatch"
             )));
         }
-        // blocks of `longest` values per candidate, of which its set's count are written
+        // blocks of `longest` values per candidate, of which its set's count are written;
+        // the surface points come first and are the ones returned
         let out = self.run(Pipeline::Residuals, params, groups, values)?;
         Ok(out
             .chunks(longest.max(1))
             .zip(sets)
             .flat_map(|(block, &s)| {
-                block[..self.sets[s].1 as usize]
+                block[..self.sets[s].2 as usize]
                     .iter()
                     .map(|&v| f64::from(v))
             })

@@ -134,6 +134,34 @@ pub enum EvalError {
     BadSet(String),
 }
 
+/// One point set: points on the surface, and optionally *free-space* points, known to lie
+/// outside the object (on the lines of sight in front of a depth sensor's returns). A
+/// surface point's residual is the signed meridian distance r; a free-space point's is
+/// min(r, 0): nothing while it is outside the candidate, its depth inside otherwise.
+/// Free-space points add to the cost and the normal equations, not to the point count,
+/// and have no entry in `residuals_on`.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PointSet<'a> {
+    pub surface: &'a [DVec3],
+    pub free_space: &'a [DVec3],
+}
+
+impl<'a> PointSet<'a> {
+    /// A set of surface points only.
+    pub fn surface(points: &'a [DVec3]) -> Self {
+        Self {
+            surface: points,
+            free_space: &[],
+        }
+    }
+}
+
+/// The residual of a point (see [`PointSet`]): a free-space point counts only inside.
+#[inline]
+pub fn point_residual(signed: f64, free_space: bool) -> f64 {
+    if free_space { signed.min(0.0) } else { signed }
+}
+
 /// The evaluator interface the solver talks to.
 ///
 /// Points are uploaded as one or more *point sets* (a batch of clouds, or one cloud's
@@ -146,7 +174,7 @@ pub trait Evaluator: Send {
     /// Human-readable device name (the adapter's name for the GPU).
     fn device_name(&self) -> String;
     /// Uploads the (normalised) point sets once; they stay for all following evaluations.
-    fn set_point_sets(&mut self, sets: &[&[DVec3]]) -> Result<(), EvalError>;
+    fn set_point_sets_with_free_space(&mut self, sets: &[PointSet]) -> Result<(), EvalError>;
     /// Normal equations of every candidate on its point set (`sets[k]` for candidate k).
     fn normal_equations_on(
         &mut self,
@@ -163,13 +191,18 @@ pub trait Evaluator: Send {
         sets: &[usize],
         loss: Loss,
     ) -> Result<Vec<Cost>, EvalError>;
-    /// Signed residuals, one block per candidate of one value per point of its set.
+    /// Signed residuals, one block per candidate of one value per surface point of its set.
     fn residuals_on(
         &mut self,
         candidates: &[Candidate],
         sets: &[usize],
     ) -> Result<Vec<f64>, EvalError>;
 
+    /// Point sets of surface points only.
+    fn set_point_sets(&mut self, sets: &[&[DVec3]]) -> Result<(), EvalError> {
+        let sets: Vec<PointSet> = sets.iter().map(|s| PointSet::surface(s)).collect();
+        self.set_point_sets_with_free_space(&sets)
+    }
     /// One point set.
     fn set_points(&mut self, points: &[DVec3]) -> Result<(), EvalError> {
         self.set_point_sets(&[points])

@@ -17,6 +17,8 @@ pub struct Case {
     pub noise: f64,
     pub outlier_fraction: f64,
     pub points: Vec<DVec3>,
+    /// the camera's position for a single-view cloud
+    pub viewpoint: Option<DVec3>,
 }
 
 /// One seeded case of the given category.
@@ -44,13 +46,16 @@ pub fn make_case(seed: u64, partial: bool, noise: f64, outlier_fraction: f64) ->
             rng.random_range(0.4..1.0),
         ),
     );
-    let mut points = if partial {
+    let (mut points, viewpoint) = if partial {
         let camera = Camera::random_view(&shape, &pose, Intrinsics::REALSENSE_640X480, &mut rng);
         let view =
             synth::render_view(&shape, &pose, &camera, 0.0001).expect("valid shape and camera");
-        synth::subsample(&view.points, 2000, &mut rng)
+        (
+            synth::subsample(&view.points, 2000, &mut rng),
+            Some(camera.pose.translation),
+        )
     } else {
-        synth::sample_surface(&shape, &pose, 2000, &mut rng)
+        (synth::sample_surface(&shape, &pose, 2000, &mut rng), None)
     };
     synth::add_noise(&mut points, noise * shape.size(), &mut rng);
     synth::add_outliers(&mut points, &shape, &pose, outlier_fraction, &mut rng);
@@ -61,6 +66,7 @@ pub fn make_case(seed: u64, partial: bool, noise: f64, outlier_fraction: f64) ->
         noise,
         outlier_fraction,
         points,
+        viewpoint,
     }
 }
 

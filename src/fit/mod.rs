@@ -21,7 +21,7 @@
 pub mod ground_truth;
 pub mod starts;
 
-use crate::eval::{Candidate, EvalError, Evaluator, Loss, Normalization};
+use crate::eval::{Candidate, EvalError, Evaluator, Loss, Normalization, PointSet};
 use crate::model::{Pose, Shape, meridian_distance};
 use crate::solve::{Bounds, Solution, SolverOptions, Stop, solve_on};
 use crate::synth;
@@ -96,6 +96,10 @@ pub struct FitOptions {
     /// prior: the section half-height a3 in world units, if known (a one-sided view
     /// cannot tell how thick an object is; a product's dimensions can)
     pub known_a3: Option<f64>,
+    /// where the depth sensor that saw the cloud was (world units; the origin for a cloud
+    /// in the camera's own frame). The space between it and every point is empty, so a
+    /// candidate that puts solid there pays for it (see [`free_space_points`]).
+    pub viewpoint: Option<DVec3>,
 }
 
 impl Default for FitOptions {
@@ -115,6 +119,7 @@ impl Default for FitOptions {
             eps_max: 2.0,
             known_axis: None,
             known_a3: None,
+            viewpoint: None,
         }
     }
 }
@@ -347,6 +352,9 @@ struct Prepared<'a> {
     norm: Normalization,
     stage1_pts: Vec<DVec3>,
     stage2_pts: Vec<DVec3>,
+    /// free-space points of each stage (empty without a viewpoint)
+    stage1_free: Vec<DVec3>,
+    stage2_free: Vec<DVec3>,
     starts: Vec<Candidate>,
     bounds: Bounds,
     opts1: SolverOptions,
@@ -378,6 +386,21 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
     let mut rng = synth::rng(o.seed);
     let stage1_pts = synth::subsample(&normalised, o.stage1_points, &mut rng);
     let stage2_pts = synth::subsample(&normalised, o.stage2_points, &mut rng);
+    let (stage1_free, stage2_free) = match o.viewpoint {
+        None => (Vec::new(), Vec::new()),
+        Some(v) if !v.is_finite() => {
+            return Err(FitError::InvalidOption(
+                "the viewpoint must be finite".into(),
+            ));
+        }
+        Some(v) => {
+            let v = norm.point(v);
+            (
+                free_space_points(&stage1_pts, v),
+                free_space_points(&stage2_pts, v),
+            )
+        }
+    };
     let bounds = o.bounds();
     let paper = o.method == Method::Paper;
     let (a4_reward, hole_preference) = if paper {
@@ -512,6 +535,8 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
         norm,
         stage1_pts,
         stage2_pts,
+        stage1_free,
+        stage2_free,
         starts,
         bounds,
         opts1,
@@ -532,8 +557,14 @@ fn fit_group(
     let (opts1, opts2) = (group[0].1.opts1, group[0].1.opts2);
     let bounds = group[0].1.bounds;
     // Stage 1: every start of every cloud, on its cloud's 150-point sample.
-    let samples: Vec<&[DVec3]> = group.iter().map(|(_, p)| p.stage1_pts.as_slice()).collect();
-    evaluator.set_point_sets(&samples)?;
+    let samples: Vec<PointSet> = group
+        .iter()
+        .map(|(_, p)| PointSet {
+            surface: &p.stage1_pts,
+            free_space: &p.stage1_free,
+        })
+        .collect();
+    evaluator.set_point_sets_with_free_space(&samples)?;
     let (starts, sets) = flatten(group.iter().map(|(_, p)| p.starts.clone()));
     // (stage 1 keeps the wide box: capping its sizes too let a start that converged fast
     // on the side of the paper's pot prune the ring starts, 51 good seeds of 60 on
@@ -560,8 +591,14 @@ fn fit_group(
     let t1 = start.elapsed();
 
     // Stage 2: the finalists of every cloud, on its cloud's 1000-point sample.
-    let samples: Vec<&[DVec3]> = group.iter().map(|(_, p)| p.stage2_pts.as_slice()).collect();
-    evaluator.set_point_sets(&samples)?;
+    let samples: Vec<PointSet> = group
+        .iter()
+        .map(|(_, p)| PointSet {
+            surface: &p.stage2_pts,
+            free_space: &p.stage2_free,
+        })
+        .collect();
+    evaluator.set_point_sets_with_free_space(&samples)?;
     let (candidates, sets) = flatten(finalists.into_iter());
     // each finalist's sizes stay where its cloud can support them: least squares would
     // stretch a size over empty space where that lowers the cost
@@ -648,9 +685,7 @@ fn refine_robustly(
             refined.push(solution);
             continue;
         };
-        let median = *magnitudes
-            .select_nth_unstable_by(n / 2, f64::total_cmp)
-            .1;
+        let median = *magnitudes.select_nth_unstable_by(n / 2, f64::total_cmp).1;
         // a floor for clouds that lie on the surface exactly (normalised units: 1e-4 of
         // the cloud's RMS radius)
         let sigma = (1.4826 * median).max(1e-4);
@@ -662,7 +697,13 @@ fn refine_robustly(
             ..*opts2
         };
         let bounds = p.supported_bounds(&solution.candidate);
-        let mut r = solve_on(evaluator, &[solution.candidate], &[cloud], &[bounds], &options)?;
+        let mut r = solve_on(
+            evaluator,
+            &[solution.candidate],
+            &[cloud],
+            &[bounds],
+            &options,
+        )?;
         let r = r.pop().expect("one solution per start");
         refined.push(Solution {
             iterations: solution.iterations + r.iterations,
@@ -671,6 +712,28 @@ fn refine_robustly(
     }
     Ok(refined)
 }
+
+/// Free-space points of a sample seen from `viewpoint` (both normalised): for each
+/// point, one point on its line of sight towards the sensor, FREE_SPACE_OFFSETS[i mod 3]
+/// in front of it. A depth sensor saw through that space, so the object is not there.
+pub fn free_space_points(sample: &[DVec3], viewpoint: DVec3) -> Vec<DVec3> {
+    sample
+        .iter()
+        .enumerate()
+        .filter_map(|(i, p)| {
+            let to_sensor = viewpoint - *p;
+            let distance = to_sensor.length();
+            let offset = FREE_SPACE_OFFSETS[i % FREE_SPACE_OFFSETS.len()];
+            // a point closer to the sensor than the offset has no free space to spare
+            (distance > 2.0 * offset).then(|| *p + to_sensor * (offset / distance))
+        })
+        .collect()
+}
+
+/// Offsets of the free-space points in normalised units (the cloud's RMS radius is 1):
+/// well clear of the noise (the suite's 2% of the size is about 0.03), near enough to the
+/// surface to catch a body grown towards the sensor.
+pub const FREE_SPACE_OFFSETS: [f64; 3] = [0.05, 0.15, 0.3];
 
 /// How far a candidate's sizes reach beyond the cloud: the largest ratio, over the
 /// canonical axes, of a1, a2, a3 to the cloud's half-extent about the candidate's centre

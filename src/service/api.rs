@@ -48,6 +48,12 @@ pub struct FitRequestOptions {
     pub axis: Option<[f64; 3]>,
     /// prior: the section half-height a3 in the cloud's units (held fixed)
     pub a3: Option<f64>,
+    /// where the depth sensor was, [x, y, z] in the cloud's frame ([0, 0, 0] for a cloud in
+    /// the camera's own frame; depth frames use the camera by default): the fit keeps
+    /// solid out of the space the sensor saw through (in a query string: `viewpoint=0,0,0`)
+    #[param(value_type = Option<Vec<f64>>)]
+    #[serde(default, deserialize_with = "viewpoint_from_array_or_text")]
+    pub viewpoint: Option<[f64; 3]>,
     /// pipeline: default, or paper (the paper's procedure, a baseline)
     pub method: Option<crate::fit::Method>,
     /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
@@ -58,6 +64,20 @@ pub struct FitRequestOptions {
 fn axis_from_array_or_text<'de, D: serde::Deserializer<'de>>(
     d: D,
 ) -> Result<Option<[f64; 3]>, D::Error> {
+    vector_from_array_or_text(d, "axis x,y,z")
+}
+
+/// The viewpoint as a JSON array `[x, y, z]` or as text `"x,y,z"` (query strings).
+fn viewpoint_from_array_or_text<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> Result<Option<[f64; 3]>, D::Error> {
+    vector_from_array_or_text(d, "viewpoint x,y,z")
+}
+
+fn vector_from_array_or_text<'de, D: serde::Deserializer<'de>>(
+    d: D,
+    what: &str,
+) -> Result<Option<[f64; 3]>, D::Error> {
     #[derive(Deserialize)]
     #[serde(untagged)]
     enum Axis {
@@ -67,7 +87,7 @@ fn axis_from_array_or_text<'de, D: serde::Deserializer<'de>>(
     match Option::<Axis>::deserialize(d)? {
         None => Ok(None),
         Some(Axis::Array(a)) => Ok(Some(a)),
-        Some(Axis::Text(t)) => crate::model::parse_floats::<3>(&t, "axis x,y,z")
+        Some(Axis::Text(t)) => crate::model::parse_floats::<3>(&t, what)
             .map(Some)
             .map_err(serde::de::Error::custom),
     }
@@ -99,6 +119,15 @@ impl FitRequestOptions {
             }
             None => None,
         };
+        let viewpoint = match self.viewpoint {
+            Some(v) if !DVec3::from_array(v).is_finite() => {
+                return Err(ApiError::unprocessable(
+                    "invalid_option",
+                    "viewpoint must be finite",
+                ));
+            }
+            v => v.map(DVec3::from_array),
+        };
         Ok(FitJob {
             points,
             options: FitOptions {
@@ -107,6 +136,7 @@ impl FitRequestOptions {
                 stage2_points: limit(self.stage2_points, defaults.stage2_points, "stage2_points")?,
                 known_axis,
                 known_a3: self.a3,
+                viewpoint,
                 method: self.method.unwrap_or_default(),
                 ..defaults
             },
@@ -546,7 +576,9 @@ async fn fit_depth(
         ));
     };
     let points = depth_points(&state, &params, depth_bytes, mask_bytes)?;
-    let job = params.options.job(points, state.config.max_points)?;
+    let mut job = params.options.job(points, state.config.max_points)?;
+    // a depth frame's points are in the camera's optical frame: the sensor is the origin
+    job.options.viewpoint.get_or_insert(DVec3::ZERO);
     Ok(respond(id, fit_one(&state, job).await?))
 }
 
