@@ -18,6 +18,7 @@
 //! point set of the evaluator, each start names its cloud's set), so one batched
 //! evaluation per solver iteration serves every cloud; [`fit`] is a batch of one.
 
+pub mod free_space;
 pub mod ground_truth;
 pub mod starts;
 
@@ -98,7 +99,7 @@ pub struct FitOptions {
     pub known_a3: Option<f64>,
     /// where the depth sensor that saw the cloud was (world units; the origin for a cloud
     /// in the camera's own frame). The space between it and every point is empty, so a
-    /// candidate that puts solid there pays for it (see [`free_space_points`]).
+    /// candidate that puts solid there pays for it (see [`free_space`]).
     pub viewpoint: Option<DVec3>,
 }
 
@@ -396,8 +397,8 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
         Some(v) => {
             let v = norm.point(v);
             (
-                free_space_points(&stage1_pts, v),
-                free_space_points(&stage2_pts, v),
+                free_space::in_front(&stage1_pts, v),
+                free_space::in_front(&stage2_pts, v),
             )
         }
     };
@@ -712,28 +713,6 @@ fn refine_robustly(
     }
     Ok(refined)
 }
-
-/// Free-space points of a sample seen from `viewpoint` (both normalised): for each
-/// point, one point on its line of sight towards the sensor, FREE_SPACE_OFFSETS[i mod 3]
-/// in front of it. A depth sensor saw through that space, so the object is not there.
-pub fn free_space_points(sample: &[DVec3], viewpoint: DVec3) -> Vec<DVec3> {
-    sample
-        .iter()
-        .enumerate()
-        .filter_map(|(i, p)| {
-            let to_sensor = viewpoint - *p;
-            let distance = to_sensor.length();
-            let offset = FREE_SPACE_OFFSETS[i % FREE_SPACE_OFFSETS.len()];
-            // a point closer to the sensor than the offset has no free space to spare
-            (distance > 2.0 * offset).then(|| *p + to_sensor * (offset / distance))
-        })
-        .collect()
-}
-
-/// Offsets of the free-space points in normalised units (the cloud's RMS radius is 1):
-/// well clear of the noise (the suite's 2% of the size is about 0.03), near enough to the
-/// surface to catch a body grown towards the sensor.
-pub const FREE_SPACE_OFFSETS: [f64; 3] = [0.05, 0.15, 0.3];
 
 /// How far a candidate's sizes reach beyond the cloud: the largest ratio, over the
 /// canonical axes, of a1, a2, a3 to the cloud's half-extent about the candidate's centre

@@ -1,0 +1,38 @@
+//! Free space: what a depth sensor's lines of sight say about where the object is not.
+//!
+//! Given the sensor's position (the fit's `viewpoint`), points on each point's line of
+//! sight a little in front of it are known to lie outside the object (the sensor saw
+//! through that space to reach the point), and the evaluators charge a candidate for each
+//! one it puts inside itself (residual min(r, 0), see `eval::PointSet`).
+//!
+//! Tried and left out: points on the lines of sight that pass just beside the cloud's
+//! outline or through its gaps (the sensor saw past the object there), at the cloud's
+//! depths. They were all outside the true shapes, but a body grown into the unseen side
+//! hides behind the visible surface and seldom crosses them: 356 -> 357 of 540 suite
+//! cases, for twice the free-space points and the assumption that nothing in front hid the
+//! outline.
+
+use glam::DVec3;
+
+/// Offsets of the in-front points in normalised units (the cloud's RMS radius is 1):
+/// clear of the noise (the suite's 2% of the size is about 0.03), near enough to the
+/// surface to catch a body grown towards the sensor. Measured on the ground-truth suite
+/// (540 single- and full-view cases): (0.1, 0.25, 0.5) 352 successes, (0.05, 0.15, 0.3)
+/// 356, (0.03, 0.08, 0.2) 349.
+pub const IN_FRONT_OFFSETS: [f64; 3] = [0.05, 0.15, 0.3];
+
+/// One point per sample point on its line of sight towards `viewpoint`, at
+/// IN_FRONT_OFFSETS[i mod 3] in front of it (all normalised).
+pub fn in_front(sample: &[DVec3], viewpoint: DVec3) -> Vec<DVec3> {
+    sample
+        .iter()
+        .enumerate()
+        .filter_map(|(i, p)| {
+            let to_sensor = viewpoint - *p;
+            let distance = to_sensor.length();
+            let offset = IN_FRONT_OFFSETS[i % IN_FRONT_OFFSETS.len()];
+            // a point closer to the sensor than the offset has no free space to spare
+            (distance > 2.0 * offset).then(|| *p + to_sensor * (offset / distance))
+        })
+        .collect()
+}
