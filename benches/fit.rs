@@ -1,6 +1,8 @@
 //! One whole fit (both stages, default options) of each paper cloud, on the CPU and GPU
 //! evaluators; and the four clouds as one lockstep batch (`fit_batch`, what
-//! `/v1/fit/batch` runs) against the four fitted one after another.
+//! `/v1/fit/batch` runs) against the four fitted one after another; and a single-view
+//! cloud of the ground-truth suite with and without its camera's position (the
+//! free-space points a viewpoint adds).
 //! `cargo bench --bench fit` (lavapipe is the GPU on a machine without one).
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
@@ -65,5 +67,33 @@ fn bench_fit(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_fit);
+fn bench_single_view(c: &mut Criterion) {
+    // the suite's case 10: single view, noise 1% of the size, no outliers
+    let case = supertoroid::fit::ground_truth::make_case(10_010, true, 0.01, 0.0);
+    let mut evaluators: Vec<Box<dyn Evaluator>> = vec![Box::new(CpuEvaluator::new())];
+    if let Ok(ctx) = GpuContext::shared(&AdapterChoice::from_env()) {
+        evaluators.push(Box::new(GpuEvaluator::new(ctx)));
+    }
+    let mut group = c.benchmark_group("single view");
+    group
+        .sample_size(20)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(3));
+    for evaluator in &mut evaluators {
+        let kind = evaluator.kind();
+        for (name, viewpoint) in [("no viewpoint", None), ("viewpoint", case.viewpoint)] {
+            let options = FitOptions {
+                seed: 10_010,
+                viewpoint,
+                ..Default::default()
+            };
+            group.bench_function(BenchmarkId::new(kind, name), |b| {
+                b.iter(|| fit(evaluator.as_mut(), &case.points, &options).unwrap())
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_fit, bench_single_view);
 criterion_main!(benches);
