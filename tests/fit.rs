@@ -48,7 +48,8 @@ fn full_clouds_are_recovered_within_the_ground_truth_bounds() {
 /// The suite's categories where the method reaches the 90% that issue 4 asks of its CI
 /// subset: every full cloud with noise of at most 1% of the size (0, 5 and 10% outliers)
 /// among the 180 cases of `bench synthetic` (default seeds), 60 cases. Measured when this
-/// test was written: 54 of 60 (90%; 56 of 60 on seeds 20000 and 30000). The other
+/// test was written: 54 of 60 (90%; 56 of 60 on seeds 20000 and 30000); 56 since the
+/// robust refinement (sixth session). The other
 /// categories do not reach it (README: Results): this is a floor for what works, not the
 /// issue's representative subset.
 #[test]
