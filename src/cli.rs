@@ -434,6 +434,9 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         },
         other => Failure::input(other.to_string()),
     })?;
+    for warning in &report.warnings {
+        eprintln!("warning: {warning}");
+    }
     let (shape, pose) = report.fitted;
     if let Some(path) = &args.mesh {
         let mesh = crate::io::mesh::tessellate(&shape, &pose, 64, 128);

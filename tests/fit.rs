@@ -569,6 +569,12 @@ fn the_camera_position_helps_single_views() {
                 ..Default::default()
             };
             let report = fit(&mut evaluator, &case.points, &options).unwrap();
+            // the camera's own position is never taken for a wrong one
+            assert!(
+                report.warnings.is_empty(),
+                "case {seed}: {:?}",
+                report.warnings
+            );
             compare(
                 (&case.shape, &case.pose),
                 (&report.fitted.0, &report.fitted.1),
@@ -582,4 +588,45 @@ fn the_camera_position_helps_single_views() {
     eprintln!("{with} of {cases} recovered with the viewpoint, {without} without");
     assert_eq!(cases, 60);
     assert!(with >= without + 4, "viewpoint {with} vs none {without}");
+}
+
+/// A viewpoint on the wrong side (opposite the camera, as a cloud in another frame than
+/// its viewpoint would give) would push the fit off the points: the fit notices that its
+/// free-space points lie inside the object, fits again without the viewpoint and says so.
+#[test]
+fn a_viewpoint_the_fit_contradicts_is_ignored_with_a_warning() {
+    let mut evaluator = CpuEvaluator::new();
+    // the suite's case 10010: single view, noise 1%, no outliers
+    let seed = 10_010;
+    let case = make_case(seed, true, 0.01, 0.0);
+    let camera = case.viewpoint.unwrap();
+    let opposite = case.pose.translation - (camera - case.pose.translation);
+    let options = |viewpoint| FitOptions {
+        seed,
+        viewpoint,
+        ..Default::default()
+    };
+    let wrong = fit(&mut evaluator, &case.points, &options(Some(opposite))).unwrap();
+    let none = fit(&mut evaluator, &case.points, &options(None)).unwrap();
+    let right = fit(&mut evaluator, &case.points, &options(Some(camera))).unwrap();
+    assert_eq!(wrong.warnings.len(), 1, "{:?}", wrong.warnings);
+    assert!(wrong.warnings[0].starts_with("viewpoint ignored"));
+    assert_eq!(
+        wrong.fitted, none.fitted,
+        "the refit is the fit without a viewpoint"
+    );
+    assert!(none.warnings.is_empty() && right.warnings.is_empty());
+    let json = serde_json::to_value(&wrong).unwrap();
+    assert!(
+        json["warnings"][0]
+            .as_str()
+            .unwrap()
+            .contains("viewpoint ignored")
+    );
+    assert!(
+        serde_json::to_value(&right)
+            .unwrap()
+            .get("warnings")
+            .is_none()
+    );
 }

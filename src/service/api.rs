@@ -403,6 +403,9 @@ async fn fit_one(state: &AppState, job: FitJob) -> Result<FitReport, ApiError> {
 }
 
 fn respond(id: RequestId, fit: FitReport) -> Json<FitResponse> {
+    for warning in &fit.warnings {
+        tracing::warn!(request_id = %id.0, "{warning}");
+    }
     Json(FitResponse {
         request_id: id.0,
         fit,
