@@ -10,9 +10,14 @@
 //!    the cloud's principal axes at the centroid (the paper starts from x, y and z). The paper's own stage-1 cost (top-view
 //!    superellipses) was measured to prefer tilted axes (see the issue), so stage 1 here
 //!    already minimises the meridian distance.
-//! 4. Stage 2: the winner refined on the stage-2 sample; mapped back to world units. The
-//!    paper's a4 reward for partial clouds runs only in `Method::Paper` (it was measured
-//!    to hurt, see [`FitOptions::a4_reward`]).
+//! 4. Stage 2: the winner refined on the stage-2 sample, then once more under a Cauchy
+//!    loss scaled by the cloud's own residual spread ([`refine_robustly`]); mapped back
+//!    to world units. The paper's a4 reward for partial clouds runs only in
+//!    `Method::Paper` (it was measured to hurt, see [`FitOptions::a4_reward`]).
+//!
+//! With a viewpoint (where the depth sensor was), both stages also carry free-space
+//! points in front of the sampled points ([`free_space`]), and a fit that contradicts
+//! its viewpoint is redone without it, with a warning.
 //!
 //! [`fit_batch`] runs both stages for many clouds in lockstep (each cloud's sample is a
 //! point set of the evaluator, each start names its cloud's set), so one batched
