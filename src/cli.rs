@@ -83,7 +83,7 @@ pub struct RenderArgs {
 pub struct BenchArgs {
     #[command(subcommand)]
     pub which: BenchCommand,
-    /// directory for <name>.json, <name>.csv and <name>.md
+    /// directory for `<name>.json`, `<name>.csv` and `<name>.md`
     #[arg(long, global = true, default_value = "bench-results")]
     pub out: PathBuf,
     /// evaluator for the fits (paper, synthetic): auto, gpu, cpu

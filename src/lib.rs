@@ -12,7 +12,7 @@
 //! * [`io`]: cloud readers and writers.
 //! * [`fit`], [`solve`]: the two-stage fit and its interior-point solver.
 //! * [`service`]: the HTTP service (axum).
-//! * [`bench`]: the benchmark harness (paper clouds, ground-truth suite, scaling).
+//! * [`bench`](mod@bench): the benchmark harness (paper clouds, ground-truth suite, scaling).
 //! * [`render`]: headless pictures of clouds and fits (wgpu render pipeline).
 //! * [`cli`]: the `supertoroid` command line.
 

@@ -20,7 +20,7 @@ use crate::model::{Pose, Shape};
 use glam::DVec3;
 
 /// Number of parameters: a1 a2 a3 a4 eps1 eps2 | tx ty tz | dx dy dz (rotation increment
-/// applied on the right: R <- R·exp([d]x)).
+/// applied on the right: R <- R·exp(\[d\]x)).
 pub const NUM_PARAMS: usize = 12;
 /// Upper-triangle entries of a 12 x 12 symmetric matrix.
 pub const NUM_UPPER: usize = NUM_PARAMS * (NUM_PARAMS + 1) / 2;

@@ -11,7 +11,7 @@
 //!    superellipses) was measured to prefer tilted axes (see the issue), so stage 1 here
 //!    already minimises the meridian distance.
 //! 4. Stage 2: the winner refined on the stage-2 sample, then once more under a Cauchy
-//!    loss scaled by the cloud's own residual spread ([`refine_robustly`]); mapped back
+//!    loss scaled by the cloud's own residual spread (`refine_robustly`); mapped back
 //!    to world units. The paper's a4 reward for partial clouds runs only in
 //!    `Method::Paper` (it was measured to hurt, see [`FitOptions::a4_reward`]).
 //!
@@ -93,7 +93,7 @@ pub struct FitOptions {
     pub huber: f64,
     /// the chosen stage-2 solution is refined under a Cauchy loss whose scale is this
     /// many robust residual scales (1.4826 · median |r| at the solution); 0 turns the
-    /// refinement off. See [`refine_robustly`].
+    /// refinement off (see `refine_robustly` in this module).
     pub refine_scale: f64,
     pub eps_min: f64,
     pub eps_max: f64,

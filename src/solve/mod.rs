@@ -7,7 +7,7 @@
 //! central path), Levenberg-Marquardt damping for global convergence (a trial step is
 //! accepted only if the barrier merit decreases, else the damping grows), the
 //! fraction-to-boundary rule so iterates stay strictly inside, and the rotation updated
-//! on the manifold (R <- R·exp([d]x), the increment starting from 0 every iteration).
+//! on the manifold (R <- R·exp(\[d\]x), the increment starting from 0 every iteration).
 //! A trial step is evaluated with its normal equations, not its cost alone: when it is
 //! taken (most are), they are the next iteration's model, so an iteration costs one
 //! evaluator call (one GPU round trip) instead of two. Measured on the paper's clouds
