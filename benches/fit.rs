@@ -10,6 +10,16 @@ use std::time::Duration;
 use supertoroid::eval::*;
 use supertoroid::fit::{FitOptions, fit, fit_batch};
 
+/// The CPU evaluator, and the GPU one when wgpu finds an adapter.
+fn evaluators() -> Vec<Box<dyn Evaluator>> {
+    let mut evaluators: Vec<Box<dyn Evaluator>> = vec![Box::new(CpuEvaluator::new())];
+    match GpuContext::shared(&AdapterChoice::from_env()) {
+        Ok(ctx) => evaluators.push(Box::new(GpuEvaluator::new(ctx))),
+        Err(e) => eprintln!("no GPU adapter, CPU only: {e}"),
+    }
+    evaluators
+}
+
 fn bench_fit(c: &mut Criterion) {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/clouds/paper");
     let clouds: Vec<(String, Vec<glam::DVec3>)> =
@@ -21,11 +31,7 @@ fn bench_fit(c: &mut Criterion) {
                 (n.to_string(), points)
             })
             .collect();
-    let mut evaluators: Vec<Box<dyn Evaluator>> = vec![Box::new(CpuEvaluator::new())];
-    match GpuContext::shared(&AdapterChoice::from_env()) {
-        Ok(ctx) => evaluators.push(Box::new(GpuEvaluator::new(ctx))),
-        Err(e) => eprintln!("no GPU adapter, CPU only: {e}"),
-    }
+    let mut evaluators = evaluators();
     let mut group = c.benchmark_group("fit");
     group
         .sample_size(20)
@@ -70,10 +76,7 @@ fn bench_fit(c: &mut Criterion) {
 fn bench_single_view(c: &mut Criterion) {
     // the suite's case 10: single view, noise 1% of the size, no outliers
     let case = supertoroid::fit::ground_truth::make_case(10_010, true, 0.01, 0.0);
-    let mut evaluators: Vec<Box<dyn Evaluator>> = vec![Box::new(CpuEvaluator::new())];
-    if let Ok(ctx) = GpuContext::shared(&AdapterChoice::from_env()) {
-        evaluators.push(Box::new(GpuEvaluator::new(ctx)));
-    }
+    let mut evaluators = evaluators();
     let mut group = c.benchmark_group("single view");
     group
         .sample_size(20)

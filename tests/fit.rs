@@ -2,8 +2,8 @@
 
 use glam::DVec3;
 use supertoroid::eval::*;
-use supertoroid::fit::ground_truth::{compare, make_case};
-use supertoroid::fit::{FitError, FitOptions, fit};
+use supertoroid::fit::ground_truth::{Case, compare, make_case};
+use supertoroid::fit::{FitError, FitOptions, FitReport, fit};
 
 /// Full clouds, noise 0-2% of the size, 0-10% outliers: a seeded CI subset of the suite.
 /// Measured when this test was written: 10 of 12 (the target of issue 4 is 98%; partial
@@ -503,41 +503,51 @@ fn true_shapes_are_supported_by_their_clouds_and_stretched_ones_are_not() {
     }
 }
 
+/// The suite's cases (default seeds of `bench synthetic`) whose category
+/// `keep(partial, noise, outliers)` accepts, with their seeds.
+fn suite_cases(keep: impl Fn(bool, f64, f64) -> bool) -> Vec<(u64, Case)> {
+    use supertoroid::bench::synthetic::{DEFAULT_SEED, category};
+    (0..180)
+        .filter_map(|i| {
+            let (partial, noise, outliers) = category(i);
+            let seed = DEFAULT_SEED + i as u64;
+            keep(partial, noise, outliers)
+                .then(|| (seed, make_case(seed, partial, noise, outliers)))
+        })
+        .collect()
+}
+
+/// Whether the fit with `options` recovers the case (the suite's rule), and the fit.
+fn recovers(evaluator: &mut CpuEvaluator, case: &Case, options: &FitOptions) -> (bool, FitReport) {
+    let report = fit(evaluator, &case.points, options).unwrap();
+    let e = compare(
+        (&case.shape, &case.pose),
+        (&report.fitted.0, &report.fitted.1),
+    );
+    (e.success(), report)
+}
+
 /// The robust refinement at the end of stage 2 (a Cauchy loss scaled by the cloud's own
 /// residual spread): on the suite's 20 noise-free single-view clouds with 5-10%
 /// outliers, the fit with it must recover clearly more shapes than without it (measured
 /// when written: 16 of 20 with it, 11 without).
 #[test]
 fn the_robust_refinement_shakes_off_outliers_on_one_sided_views() {
-    use supertoroid::bench::synthetic::{DEFAULT_SEED, category};
     let mut evaluator = CpuEvaluator::new();
-    let (mut cases, mut with, mut without) = (0, 0, 0);
-    for i in 0..180 {
-        let (partial, noise, outliers) = category(i);
-        if !partial || noise > 0.0 || outliers == 0.0 {
-            continue;
-        }
-        let seed = DEFAULT_SEED + i as u64;
-        let case = make_case(seed, partial, noise, outliers);
-        let mut success = |refine_scale: f64| {
-            let options = FitOptions {
-                seed,
-                refine_scale,
-                ..Default::default()
-            };
-            let report = fit(&mut evaluator, &case.points, &options).unwrap();
-            compare(
-                (&case.shape, &case.pose),
-                (&report.fitted.0, &report.fitted.1),
-            )
-            .success() as usize
+    let cases = suite_cases(|partial, noise, outliers| partial && noise == 0.0 && outliers > 0.0);
+    let (mut with, mut without) = (0, 0);
+    for (seed, case) in &cases {
+        let options = |refine_scale| FitOptions {
+            seed: *seed,
+            refine_scale,
+            ..Default::default()
         };
-        with += success(FitOptions::default().refine_scale);
-        without += success(0.0);
-        cases += 1;
+        let default_scale = FitOptions::default().refine_scale;
+        with += recovers(&mut evaluator, case, &options(default_scale)).0 as usize;
+        without += recovers(&mut evaluator, case, &options(0.0)).0 as usize;
     }
-    eprintln!("{with} of {cases} recovered with the refinement, {without} without");
-    assert_eq!(cases, 20);
+    eprintln!("{with} of 20 recovered with the refinement, {without} without");
+    assert_eq!(cases.len(), 20);
     assert!(
         with >= 15,
         "only {with} of 20 recovered with the refinement"
@@ -551,42 +561,28 @@ fn the_robust_refinement_shakes_off_outliers_on_one_sided_views() {
 /// when written: 37 with it, 32 without; the targets of issue 4 are far above either).
 #[test]
 fn the_camera_position_helps_single_views() {
-    use supertoroid::bench::synthetic::{DEFAULT_SEED, category};
     let mut evaluator = CpuEvaluator::new();
-    let (mut cases, mut with, mut without) = (0, 0, 0);
-    for i in 0..180 {
-        let (partial, noise, outliers) = category(i);
-        if !partial || noise > 0.011 {
-            continue;
-        }
-        let seed = DEFAULT_SEED + i as u64;
-        let case = make_case(seed, partial, noise, outliers);
-        assert!(case.viewpoint.is_some());
-        let mut success = |viewpoint: Option<DVec3>| {
-            let options = FitOptions {
-                seed,
-                viewpoint,
-                ..Default::default()
-            };
-            let report = fit(&mut evaluator, &case.points, &options).unwrap();
-            // the camera's own position is never taken for a wrong one
-            assert!(
-                report.warnings.is_empty(),
-                "case {seed}: {:?}",
-                report.warnings
-            );
-            compare(
-                (&case.shape, &case.pose),
-                (&report.fitted.0, &report.fitted.1),
-            )
-            .success() as usize
+    let cases = suite_cases(|partial, noise, _| partial && noise <= 0.011);
+    let (mut with, mut without) = (0, 0);
+    for (seed, case) in &cases {
+        let options = |viewpoint| FitOptions {
+            seed: *seed,
+            viewpoint,
+            ..Default::default()
         };
-        with += success(case.viewpoint);
-        without += success(None);
-        cases += 1;
+        assert!(case.viewpoint.is_some());
+        let (recovered, report) = recovers(&mut evaluator, case, &options(case.viewpoint));
+        // the camera's own position is never taken for a wrong one
+        assert!(
+            report.warnings.is_empty(),
+            "case {seed}: {:?}",
+            report.warnings
+        );
+        with += recovered as usize;
+        without += recovers(&mut evaluator, case, &options(None)).0 as usize;
     }
-    eprintln!("{with} of {cases} recovered with the viewpoint, {without} without");
-    assert_eq!(cases, 60);
+    eprintln!("{with} of 60 recovered with the viewpoint, {without} without");
+    assert_eq!(cases.len(), 60);
     assert!(with >= without + 4, "viewpoint {with} vs none {without}");
 }
 

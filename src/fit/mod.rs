@@ -626,13 +626,7 @@ fn fit_group(
     let (opts1, opts2) = (group[0].1.opts1, group[0].1.opts2);
     let bounds = group[0].1.bounds;
     // Stage 1: every start of every cloud, on its cloud's 150-point sample.
-    let samples: Vec<PointSet> = group
-        .iter()
-        .map(|(_, p)| PointSet {
-            surface: &p.stage1_pts,
-            free_space: &p.stage1_free,
-        })
-        .collect();
+    let samples: Vec<PointSet> = group.iter().map(|(_, p)| p.stage1_set()).collect();
     evaluator.set_point_sets_with_free_space(&samples)?;
     let (starts, sets) = flatten(group.iter().map(|(_, p)| p.starts.clone()));
     // (stage 1 keeps the wide box: capping its sizes too let a start that converged fast
@@ -660,13 +654,7 @@ fn fit_group(
     let t1 = start.elapsed();
 
     // Stage 2: the finalists of every cloud, on its cloud's 1000-point sample.
-    let samples: Vec<PointSet> = group
-        .iter()
-        .map(|(_, p)| PointSet {
-            surface: &p.stage2_pts,
-            free_space: &p.stage2_free,
-        })
-        .collect();
+    let samples: Vec<PointSet> = group.iter().map(|(_, p)| p.stage2_set()).collect();
     evaluator.set_point_sets_with_free_space(&samples)?;
     let (candidates, sets) = flatten(finalists.into_iter());
     // each finalist's sizes stay where its cloud can support them: least squares would
@@ -800,6 +788,22 @@ pub fn overreach(candidate: &Candidate, points: &[DVec3]) -> f64 {
 }
 
 impl Prepared<'_> {
+    /// Stage 1's point set: its sample and the free-space points in front of it.
+    fn stage1_set(&self) -> PointSet<'_> {
+        PointSet {
+            surface: &self.stage1_pts,
+            free_space: &self.stage1_free,
+        }
+    }
+
+    /// Stage 2's point set.
+    fn stage2_set(&self) -> PointSet<'_> {
+        PointSet {
+            surface: &self.stage2_pts,
+            free_space: &self.stage2_free,
+        }
+    }
+
     /// The solver's box for a stage-2 finalist: sizes no larger than `max_overreach`
     /// times the stage-2 sample's half-extent along the finalist's axes, about its centre.
     fn supported_bounds(&self, candidate: &Candidate) -> Bounds {
