@@ -248,7 +248,8 @@ pub struct SampleArgs {
     #[arg(long, default_value_t = 2000)]
     pub points: usize,
     /// keep only what one pinhole camera (640x480, RealSense-like) sees from a random
-    /// viewpoint chosen by the seed
+    /// viewpoint chosen by the seed; the camera's position goes to stderr as the
+    /// `--viewpoint` to give `fit`
     #[arg(long)]
     pub view: bool,
     /// Gaussian noise sigma as a fraction of the object size (bounding-box half-diagonal)
@@ -339,6 +340,8 @@ fn sample(args: SampleArgs) -> Result<(), Failure> {
         if view.points.is_empty() {
             return Err(Failure::input("the camera sees no part of the object"));
         }
+        let eye = camera.pose.translation;
+        eprintln!("camera at --viewpoint {},{},{}", eye.x, eye.y, eye.z);
         synth::subsample(&view.points, args.points, &mut rng)
     } else {
         synth::sample_surface(&shape, &pose, args.points, &mut rng)

@@ -309,3 +309,37 @@ fn fit_reads_stdin_writes_mesh_and_residuals_and_mesh_reads_the_json() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
 }
+
+/// `sample --view` names its camera as the `--viewpoint` to give `fit`, and `fit` takes
+/// it without a warning.
+#[test]
+fn a_sampled_view_names_the_viewpoint_that_fit_takes() {
+    let cloud = tmp("view.xyz");
+    let out = bin()
+        .args(["sample", "--shape", SHAPE, "--view", "--seed", "5", "-o"])
+        .arg(&cloud)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let viewpoint = stderr
+        .lines()
+        .find_map(|l| l.strip_prefix("camera at --viewpoint "))
+        .unwrap_or_else(|| panic!("no camera line in {stderr:?}"))
+        .trim()
+        .to_owned();
+    assert_eq!(viewpoint.split(',').count(), 3, "{viewpoint}");
+    let fit = bin()
+        .args(["fit", "--backend", "cpu", "--viewpoint", &viewpoint])
+        .arg(&cloud)
+        .output()
+        .unwrap();
+    assert!(
+        fit.status.success(),
+        "{}",
+        String::from_utf8_lossy(&fit.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&fit.stdout).unwrap();
+    assert!(json.get("warnings").is_none(), "{json}");
+    assert!(!String::from_utf8_lossy(&fit.stderr).contains("warning"));
+}
