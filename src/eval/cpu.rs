@@ -46,14 +46,13 @@ impl CpuEvaluator {
         &self.points[first..first + surface + free]
     }
 
-    /// `work(candidate, chunk)` over every (candidate, chunk of its set) pair in
-    /// parallel, so a batch of small stage-1 samples spreads over cores as well as one
-    /// large cloud. Returns, per candidate, its chunks' results in chunk order; the
+    /// `work(candidate, chunk, surface points in the chunk)` over every (candidate, chunk
+    /// of its set) pair in parallel, so a batch of small stage-1 samples spreads over
+    /// cores as well as one large cloud. Returns, per candidate, its chunks' results in chunk order; the
     /// callers sum them in that order: the same sums whatever the thread schedule or the
     /// other candidates of the batch, so a seed always gives the same fit, alone or in a
-    /// batch of clouds.
-    /// `work` gets the candidate, the chunk, and how many of the chunk's leading points
-    /// are surface points (the rest are free-space points).
+    /// batch of clouds. A chunk's leading points are surface points, the rest (of the
+    /// last chunks) free-space points.
     fn per_chunk<T: Send>(
         &self,
         sets: &[usize],
@@ -126,6 +125,14 @@ impl Evaluator for CpuEvaluator {
             let mut ne = NormalEquations::zero();
             for (i, p) in chunk.iter().enumerate() {
                 let free_space = i >= surface;
+                // most free-space points lie outside: the distance alone tells, at a
+                // fraction of the cost of the Jacobian row
+                if free_space {
+                    let q = rotation.transpose() * (*p - c.pose.translation);
+                    if meridian_distance(&c.shape, q).signed >= 0.0 {
+                        continue;
+                    }
+                }
                 let (r, row) = jacobian_row(c, rotation, *p);
                 if !r.is_finite() || row.iter().any(|x| !x.is_finite()) {
                     continue;
