@@ -10,6 +10,21 @@ use std::time::Duration;
 use supertoroid::eval::*;
 use supertoroid::fit::{FitOptions, fit, fit_batch};
 
+/// A group of 20 samples after half a second of warm-up, over `seconds`: whole fits take
+/// milliseconds, and the 2-core machine should get through `cargo bench` in minutes.
+fn timed_group<'a>(
+    c: &'a mut Criterion,
+    name: &str,
+    seconds: u64,
+) -> criterion::BenchmarkGroup<'a, criterion::measurement::WallTime> {
+    let mut group = c.benchmark_group(name);
+    group
+        .sample_size(20)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(seconds));
+    group
+}
+
 /// The CPU evaluator, and the GPU one when wgpu finds an adapter.
 fn evaluators() -> Vec<Box<dyn Evaluator>> {
     let mut evaluators: Vec<Box<dyn Evaluator>> = vec![Box::new(CpuEvaluator::new())];
@@ -32,11 +47,7 @@ fn bench_fit(c: &mut Criterion) {
             })
             .collect();
     let mut evaluators = evaluators();
-    let mut group = c.benchmark_group("fit");
-    group
-        .sample_size(20)
-        .warm_up_time(Duration::from_millis(500))
-        .measurement_time(Duration::from_secs(3));
+    let mut group = timed_group(c, "fit", 3);
     for evaluator in &mut evaluators {
         let kind = evaluator.kind();
         for (name, points) in &clouds {
@@ -47,11 +58,7 @@ fn bench_fit(c: &mut Criterion) {
     }
     group.finish();
 
-    let mut group = c.benchmark_group("batch of the four clouds");
-    group
-        .sample_size(20)
-        .warm_up_time(Duration::from_millis(500))
-        .measurement_time(Duration::from_secs(4));
+    let mut group = timed_group(c, "batch of the four clouds", 4);
     let options = FitOptions::default();
     let batch: Vec<(&[glam::DVec3], &FitOptions)> = clouds
         .iter()
@@ -77,11 +84,7 @@ fn bench_single_view(c: &mut Criterion) {
     // the suite's case 10: single view, noise 1% of the size, no outliers
     let case = supertoroid::fit::ground_truth::make_case(10_010, true, 0.01, 0.0);
     let mut evaluators = evaluators();
-    let mut group = c.benchmark_group("single view");
-    group
-        .sample_size(20)
-        .warm_up_time(Duration::from_millis(500))
-        .measurement_time(Duration::from_secs(3));
+    let mut group = timed_group(c, "single view", 3);
     for evaluator in &mut evaluators {
         let kind = evaluator.kind();
         for (name, viewpoint) in [("no viewpoint", None), ("viewpoint", case.viewpoint)] {

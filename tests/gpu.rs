@@ -22,6 +22,21 @@ fn context() -> Arc<GpuContext> {
     }
 }
 
+/// Costs of the GPU against the reference, candidate by candidate: the same point counts,
+/// costs within 2e-3 relative to the reference's (or to `floor`, where it is ~0).
+fn compare_costs(gpu: &[Cost], cpu: &[Cost], floor: f64) {
+    assert_eq!(gpu.len(), cpu.len());
+    for (k, (a, b)) in gpu.iter().zip(cpu).enumerate() {
+        assert_eq!(a.count, b.count, "candidate {k}");
+        assert!(
+            (a.cost - b.cost).abs() <= 2e-3 * b.cost.max(floor),
+            "candidate {k}: {} vs {}",
+            a.cost,
+            b.cost
+        );
+    }
+}
+
 fn random_shape(rng: &mut impl Rng) -> Shape {
     let eps = |rng: &mut synth::SeededRng| match rng.random_range(0..4) {
         0 => rng.random_range(0.1..0.15),
@@ -392,13 +407,7 @@ fn candidates_on_different_point_sets_match_the_reference() {
     }
     let gc = gpu.costs_on(&batch, &which, loss).unwrap();
     let cc = cpu.costs_on(&batch, &which, loss).unwrap();
-    for (k, (a, b)) in gc.iter().zip(&cc).enumerate() {
-        assert_eq!(a.count, b.count, "candidate {k}");
-        assert!(
-            (a.cost - b.cost).abs() <= 2e-3 * b.cost.max(1e-6),
-            "candidate {k}"
-        );
-    }
+    compare_costs(&gc, &cc, 1e-6);
     let gr = gpu.residuals_on(&batch, &which).unwrap();
     let cr = cpu.residuals_on(&batch, &which).unwrap();
     let expected: usize = which.iter().map(|&k| clouds[k].len()).sum();
@@ -552,15 +561,7 @@ fn free_space_points_count_only_inside_the_candidate() {
     assert_eq!(g[1].count, c[1].count);
     let gc = gpu.costs_on(&batch, &which, loss).unwrap();
     let cc = cpu.costs_on(&batch, &which, loss).unwrap();
-    for (k, (a, b)) in gc.iter().zip(&cc).enumerate() {
-        assert_eq!(a.count, b.count, "candidate {k}");
-        assert!(
-            (a.cost - b.cost).abs() <= 2e-3 * b.cost.max(1e-3),
-            "candidate {k}: {} vs {}",
-            a.cost,
-            b.cost
-        );
-    }
+    compare_costs(&gc, &cc, 1e-3);
     let gr = gpu.residuals_on(&batch, &which).unwrap();
     assert_eq!(gr.len(), 2 * surface.len() + 150);
     assert_eq!(cpu.residuals_on(&batch, &which).unwrap().len(), gr.len());
