@@ -130,10 +130,23 @@ fn bench_synthetic_and_scaling_write_every_field() {
             "partial_with_outliers_rate",
             "errors_full",
             "errors_partial",
+            "by_noise_ratio",
+            "by_noise_warning",
         ],
     );
     let cases = v["cases"].as_array().unwrap();
     assert_eq!(cases.len(), 5);
+    // every case falls in one noise-ratio band and one warning row, per cloud kind
+    let total = |key: &str| {
+        v[key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|b| b["cases"].as_u64().unwrap())
+            .sum::<u64>()
+    };
+    assert_eq!(total("by_noise_ratio"), 5);
+    assert_eq!(total("by_noise_warning"), 5);
     for c in cases {
         has(
             c,
@@ -149,6 +162,8 @@ fn bench_synthetic_and_scaling_write_every_field() {
                 "a4",
                 "eps",
                 "t_total_ms",
+                "noise_ratio",
+                "noise_warning",
             ],
         );
     }

@@ -251,6 +251,7 @@ fn cli_fit_prints_every_documented_field() {
         "/quality/median_distance",
         "/quality/relative_rms",
         "/quality/inlier_fraction",
+        "/quality/noise_sigma",
         "/timing_ms/stage1",
         "/timing_ms/stage2",
         "/timing_ms/total",
@@ -574,7 +575,7 @@ fn the_camera_position_helps_single_views() {
         let (recovered, report) = recovers(&mut evaluator, case, &options(case.viewpoint));
         // the camera's own position is never taken for a wrong one
         assert!(
-            report.warnings.is_empty(),
+            viewpoint_warnings(&report).is_empty(),
             "case {seed}: {:?}",
             report.warnings
         );
@@ -605,24 +606,104 @@ fn a_viewpoint_the_fit_contradicts_is_ignored_with_a_warning() {
     let wrong = fit(&mut evaluator, &case.points, &options(Some(opposite))).unwrap();
     let none = fit(&mut evaluator, &case.points, &options(None)).unwrap();
     let right = fit(&mut evaluator, &case.points, &options(Some(camera))).unwrap();
-    assert_eq!(wrong.warnings.len(), 1, "{:?}", wrong.warnings);
-    assert!(wrong.warnings[0].starts_with("viewpoint ignored"));
+    assert_eq!(viewpoint_warnings(&wrong).len(), 1, "{:?}", wrong.warnings);
     assert_eq!(
         wrong.fitted, none.fitted,
         "the refit is the fit without a viewpoint"
     );
-    assert!(none.warnings.is_empty() && right.warnings.is_empty());
+    assert!(viewpoint_warnings(&none).is_empty() && viewpoint_warnings(&right).is_empty());
     let json = serde_json::to_value(&wrong).unwrap();
     assert!(
-        json["warnings"][0]
-            .as_str()
+        json["warnings"]
+            .as_array()
             .unwrap()
-            .contains("viewpoint ignored")
+            .iter()
+            .any(|w| w.as_str().unwrap().starts_with("viewpoint ignored"))
     );
+}
+
+fn viewpoint_warnings(report: &FitReport) -> Vec<&String> {
+    report
+        .warnings
+        .iter()
+        .filter(|w| w.starts_with("viewpoint ignored"))
+        .collect()
+}
+
+/// The fit says when the noise is too large for the shape to be measured
+/// (`fit::NOISE_WARNING_RATIO`): the fits it does not warn about are the ones to trust.
+/// On the suite's 90 full clouds (default seeds) the unwarned fits must be within the
+/// suite's tolerances in 95% of cases at least (measured when written: 59 of 59, and
+/// 124 of 125 on seeds 20000 and 30000), and the warned ones must do worse (measured:
+/// 14 of 31 within tolerance).
+#[test]
+fn fits_without_a_noise_warning_are_within_tolerance() {
+    let mut evaluator = CpuEvaluator::new();
+    let (mut unwarned, mut unwarned_ok, mut warned, mut warned_ok) = (0, 0, 0, 0);
+    for (seed, case) in suite_cases(|partial, _, _| !partial) {
+        let options = FitOptions {
+            seed,
+            ..Default::default()
+        };
+        let (ok, report) = recovers(&mut evaluator, &case, &options);
+        let noisy = report.warnings.iter().any(|w| w.starts_with("noisy"));
+        // the warning follows the noise: never on a clean cloud
+        assert!(
+            !(noisy && case.noise == 0.0),
+            "case {seed}: {:?}",
+            report.warnings
+        );
+        if noisy {
+            (warned, warned_ok) = (warned + 1, warned_ok + ok as usize);
+        } else {
+            (unwarned, unwarned_ok) = (unwarned + 1, unwarned_ok + ok as usize);
+            if !ok {
+                eprintln!("case {seed}: unwarned and off: {:?}", report.shape);
+            }
+        }
+    }
+    eprintln!(
+        "unwarned {unwarned_ok} of {unwarned} within tolerance, warned {warned_ok} of {warned}"
+    );
+    assert!(unwarned >= 50, "only {unwarned} of 90 fits unwarned");
     assert!(
-        serde_json::to_value(&right)
-            .unwrap()
-            .get("warnings")
-            .is_none()
+        unwarned_ok * 100 >= unwarned * 95,
+        "{unwarned_ok} of {unwarned} unwarned fits within tolerance (95% asked)"
     );
+    assert!(warned > 0 && warned_ok * unwarned < unwarned_ok * warned);
+}
+
+/// A thin ring (a3 = 1 cm) under sensor noise of 0.6 cm is flagged; the same ring clean
+/// or under 1 mm of noise is not; the warning reaches the JSON; and the noise estimate is
+/// within 20% of the true sigma (measured when written: 0.97 and 5.9 mm; the meridian
+/// distance alone read 1.75 mm for the 1 mm).
+#[test]
+fn a_thin_ring_under_heavy_noise_is_flagged() {
+    use supertoroid::model::{Pose, Shape};
+    let shape = Shape::new(0.05, 0.05, 0.01, 2.0, 1.0, 1.0);
+    let pose = Pose::default();
+    let mut evaluator = CpuEvaluator::new();
+    for (sigma, flagged, (low, high)) in [
+        (0.0, false, (0.0, 1e-4)),
+        (0.001, false, (0.8, 1.25)),
+        (0.006, true, (0.8, 1.25)),
+    ] {
+        let mut rng = supertoroid::synth::rng(5);
+        let mut points = supertoroid::synth::sample_surface(&shape, &pose, 2000, &mut rng);
+        supertoroid::synth::add_noise(&mut points, sigma, &mut rng);
+        let report = fit(&mut evaluator, &points, &FitOptions::default()).unwrap();
+        let json = serde_json::to_value(&report).unwrap();
+        let noise = json["quality"]["noise_sigma"].as_f64().unwrap();
+        let ratio = if sigma > 0.0 { noise / sigma } else { noise };
+        eprintln!("sigma {sigma}: estimated {noise}");
+        assert!(
+            (low..=high).contains(&ratio),
+            "sigma {sigma}: estimated {noise}"
+        );
+        let says = json
+            .get("warnings")
+            .and_then(|w| w.as_array())
+            .is_some_and(|w| w.iter().any(|w| w.as_str().unwrap().starts_with("noisy")));
+        assert_eq!(says, flagged, "sigma {sigma}: {:?}", report.warnings);
+    }
 }

@@ -34,7 +34,23 @@ pub struct Case {
     pub a4: f64,
     pub eps: f64,
     pub t_total_ms: f64,
+    /// the true noise sigma over the true shape's smallest half-axis
+    pub noise_ratio: f64,
+    /// whether the fit carried the noise warning (`fit::NOISE_WARNING_RATIO`)
+    pub noise_warning: bool,
 }
+
+/// Successes among the cases of one cloud kind in one band of a quantity.
+#[derive(Clone, Debug, Serialize)]
+pub struct Band {
+    pub partial: bool,
+    pub label: String,
+    pub cases: usize,
+    pub successes: usize,
+}
+
+/// Bands of the true noise ratio (noise sigma / smallest half-axis).
+const NOISE_RATIO_BANDS: [f64; 4] = [0.05, 0.1, 0.2, 0.3];
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Category {
@@ -70,6 +86,10 @@ pub struct SyntheticReport {
     pub partial_with_outliers_rate: f64,
     pub errors_full: ErrorStats,
     pub errors_partial: ErrorStats,
+    /// success by the true noise ratio (noise sigma / smallest half-axis)
+    pub by_noise_ratio: Vec<Band>,
+    /// success of the fits with and without the noise warning
+    pub by_noise_warning: Vec<Band>,
     /// pictures of failed cases (paths relative to the report)
     pub pictures: Vec<String>,
 }
@@ -145,6 +165,9 @@ pub fn run(
             a4: e.a4,
             eps: e.eps,
             t_total_ms: report.timing_ms.total,
+            noise_ratio: noise * case.shape.size()
+                / case.shape.a1.min(case.shape.a2).min(case.shape.a3),
+            noise_warning: report.warnings.iter().any(|w| w.starts_with("noisy")),
         });
         bar.inc(1);
     }
@@ -168,6 +191,7 @@ pub fn run(
     }
     let full: Vec<&Case> = out.iter().filter(|c| !c.partial).collect();
     let partial: Vec<&Case> = out.iter().filter(|c| c.partial).collect();
+    let (by_noise_ratio, by_noise_warning) = bands(&out);
     Ok(SyntheticReport {
         machine: Machine::probe(),
         backend: evaluator.device_name(),
@@ -179,9 +203,48 @@ pub fn run(
         errors_full: error_stats(&full),
         errors_partial: error_stats(&partial),
         categories,
+        by_noise_ratio,
+        by_noise_warning,
         cases: out,
         pictures,
     })
+}
+
+/// The success tables by noise ratio band and by noise warning, full clouds then partial.
+fn bands(cases: &[Case]) -> (Vec<Band>, Vec<Band>) {
+    let band = |partial: bool, label: String, keep: &dyn Fn(&Case) -> bool| {
+        let members: Vec<&Case> = cases
+            .iter()
+            .filter(|c| c.partial == partial && keep(c))
+            .collect();
+        Band {
+            partial,
+            label,
+            cases: members.len(),
+            successes: members.iter().filter(|c| c.success).count(),
+        }
+    };
+    let mut by_ratio = Vec::new();
+    let mut by_warning = Vec::new();
+    for partial in [false, true] {
+        let mut low = 0.0;
+        for high in NOISE_RATIO_BANDS.into_iter().chain([f64::INFINITY]) {
+            let label = if high.is_finite() {
+                format!("{low:.2} - {high:.2}")
+            } else {
+                format!(">= {low:.2}")
+            };
+            by_ratio.push(band(partial, label, &|c| {
+                (low..high).contains(&c.noise_ratio)
+            }));
+            low = high;
+        }
+        for warned in [false, true] {
+            let label = if warned { "warned" } else { "not warned" }.to_string();
+            by_warning.push(band(partial, label, &|c| c.noise_warning == warned));
+        }
+    }
+    (by_ratio, by_warning)
 }
 
 impl Report for SyntheticReport {
@@ -191,11 +254,11 @@ impl Report for SyntheticReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms\n",
+            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,noise_warning\n",
         );
         for c in &self.cases {
             s += &format!(
-                "{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 c.seed,
                 c.partial,
                 c.noise,
@@ -206,7 +269,9 @@ impl Report for SyntheticReport {
                 c.sizes,
                 c.a4,
                 c.eps,
-                c.t_total_ms
+                c.t_total_ms,
+                c.noise_ratio,
+                c.noise_warning
             );
         }
         s
@@ -274,6 +339,18 @@ impl Report for SyntheticReport {
                 c.successes,
                 c.cases,
                 100.0 * c.rate
+            );
+        }
+        md += "\nBy the noise against the shape: the true noise sigma over the true shape's smallest half-axis (min of a1, a2, a3), and whether the fit carried the noise warning (its own estimate of the same ratio at or above `fit::NOISE_WARNING_RATIO`):\n\n| cloud | band | cases | success |\n|---|---|---:|---:|\n";
+        for b in self.by_noise_ratio.iter().chain(&self.by_noise_warning) {
+            md += &format!(
+                "| {} | {} | {} | {}/{} ({:.0}%) |\n",
+                if b.partial { "partial" } else { "full" },
+                b.label,
+                b.cases,
+                b.successes,
+                b.cases,
+                100.0 * b.successes as f64 / b.cases.max(1) as f64
             );
         }
         md += "\nError distributions (median / 90th percentile / max):\n\n| | centre / size | axis [deg] | sizes (rel.) | a4 (rel.) | eps | time [ms] |\n|---|---|---|---|---|---|---|\n";
