@@ -707,3 +707,96 @@ fn a_thin_ring_under_heavy_noise_is_flagged() {
         assert_eq!(says, flagged, "sigma {sigma}: {:?}", report.warnings);
     }
 }
+
+/// Told where the sensor was, a fit can be drawn from there (`fit::coverage`): the true
+/// shape of a single view shows the sensor surface that the points cover, a body grown
+/// into the side the sensor did not see shows it surface without points.
+#[test]
+fn the_visible_surface_of_the_true_shape_is_covered_and_a_grown_ones_is_not() {
+    use supertoroid::fit::coverage::{MIN_VISIBLE_COVERAGE, visible_coverage};
+    // the suite's case 10010: single view, noise 1%
+    let case = make_case(10_010, true, 0.01, 0.0);
+    let norm = Normalization::of(&case.points);
+    let points = norm.points(&case.points);
+    let viewpoint = norm.point(case.viewpoint.unwrap());
+    let truth = norm.candidate(&case.shape, &case.pose);
+    let covered = visible_coverage(&truth, &points, viewpoint);
+    // grown: twice as thick and wide, moved away from the sensor so that its front
+    // stays about where the points are
+    let mut grown = truth;
+    grown.shape.a1 *= 2.0;
+    grown.shape.a2 *= 2.0;
+    grown.shape.a3 *= 2.0;
+    let away = (truth.pose.translation - viewpoint).normalize();
+    grown.pose.translation += away * truth.shape.a3;
+    let uncovered = visible_coverage(&grown, &points, viewpoint);
+    eprintln!("coverage: truth {covered:.2}, grown {uncovered:.2}");
+    assert!(covered >= 0.9, "truth covered {covered}");
+    assert!(
+        uncovered < MIN_VISIBLE_COVERAGE,
+        "grown body covered {uncovered}"
+    );
+}
+
+/// A single view whose first fit leaves its visible surface uncovered is fitted again
+/// with other samples (`FitOptions::unseen_surface_retries`). The suite's case 10063
+/// (noise-free single view): without retries a body twice too large, flagged; with them,
+/// the true shape and no warning. Over the suite's 30 noise-free single views at least 28
+/// must be recovered (measured when written: 29; 25 without retries).
+#[test]
+fn an_uncovered_single_view_fit_is_retried_with_other_samples() {
+    let mut evaluator = CpuEvaluator::new();
+    let seed = 10_063;
+    let case = make_case(seed, true, 0.0, 0.0);
+    let options = |retries| FitOptions {
+        seed,
+        viewpoint: case.viewpoint,
+        unseen_surface_retries: retries,
+        ..Default::default()
+    };
+    let (once_ok, once) = recovers(&mut evaluator, &case, &options(0));
+    assert!(!once_ok);
+    assert!(
+        once.warnings
+            .iter()
+            .any(|w| w.starts_with("unseen surface")),
+        "{:?}",
+        once.warnings
+    );
+    let (retried_ok, retried) = recovers(&mut evaluator, &case, &options(3));
+    assert!(retried_ok, "{:?}", retried.shape);
+    assert!(retried.warnings.is_empty(), "{:?}", retried.warnings);
+    assert!(retried.quality.visible_coverage.unwrap() >= 0.75);
+    // without a viewpoint there is nothing to draw the fit from
+    let blind = fit(
+        &mut evaluator,
+        &case.points,
+        &options_without_viewpoint(seed),
+    )
+    .unwrap();
+    assert!(blind.quality.visible_coverage.is_none());
+
+    let mut recovered = 0;
+    let cases = suite_cases(|partial, noise, _| partial && noise == 0.0);
+    for (seed, case) in &cases {
+        let options = FitOptions {
+            seed: *seed,
+            viewpoint: case.viewpoint,
+            ..Default::default()
+        };
+        recovered += recovers(&mut evaluator, case, &options).0 as usize;
+    }
+    eprintln!(
+        "{recovered} of {} noise-free single views recovered",
+        cases.len()
+    );
+    assert_eq!(cases.len(), 30);
+    assert!(recovered >= 28, "only {recovered} of 30 recovered");
+}
+
+fn options_without_viewpoint(seed: u64) -> FitOptions {
+    FitOptions {
+        seed,
+        ..Default::default()
+    }
+}

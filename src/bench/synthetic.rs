@@ -38,6 +38,9 @@ pub struct Case {
     pub noise_ratio: f64,
     /// whether the fit carried the noise warning (`fit::NOISE_WARNING_RATIO`)
     pub noise_warning: bool,
+    /// whether it carried the unseen-surface warning (`fit::coverage`, single views
+    /// with the viewpoint only)
+    pub coverage_warning: bool,
 }
 
 /// Successes among the cases of one cloud kind in one band of a quantity.
@@ -88,8 +91,9 @@ pub struct SyntheticReport {
     pub errors_partial: ErrorStats,
     /// success by the true noise ratio (noise sigma / smallest half-axis)
     pub by_noise_ratio: Vec<Band>,
-    /// success of the fits with and without the noise warning
-    pub by_noise_warning: Vec<Band>,
+    /// success of the fits without a warning, with the noise warning, with the
+    /// unseen-surface warning (a fit can carry both)
+    pub by_warning: Vec<Band>,
     /// pictures of failed cases (paths relative to the report)
     pub pictures: Vec<String>,
 }
@@ -168,6 +172,7 @@ pub fn run(
             noise_ratio: noise * case.shape.size()
                 / case.shape.a1.min(case.shape.a2).min(case.shape.a3),
             noise_warning: report.warnings.iter().any(|w| w.starts_with("noisy")),
+            coverage_warning: report.warnings.iter().any(|w| w.starts_with("unseen")),
         });
         bar.inc(1);
     }
@@ -191,7 +196,7 @@ pub fn run(
     }
     let full: Vec<&Case> = out.iter().filter(|c| !c.partial).collect();
     let partial: Vec<&Case> = out.iter().filter(|c| c.partial).collect();
-    let (by_noise_ratio, by_noise_warning) = bands(&out);
+    let (by_noise_ratio, by_warning) = bands(&out);
     Ok(SyntheticReport {
         machine: Machine::probe(),
         backend: evaluator.device_name(),
@@ -204,13 +209,13 @@ pub fn run(
         errors_partial: error_stats(&partial),
         categories,
         by_noise_ratio,
-        by_noise_warning,
+        by_warning,
         cases: out,
         pictures,
     })
 }
 
-/// The success tables by noise ratio band and by noise warning, full clouds then partial.
+/// The success tables by noise ratio band and by warning, full clouds then partial.
 fn bands(cases: &[Case]) -> (Vec<Band>, Vec<Band>) {
     let band = |partial: bool, label: String, keep: &dyn Fn(&Case) -> bool| {
         let members: Vec<&Case> = cases
@@ -239,10 +244,13 @@ fn bands(cases: &[Case]) -> (Vec<Band>, Vec<Band>) {
             }));
             low = high;
         }
-        for warned in [false, true] {
-            let label = if warned { "warned" } else { "not warned" }.to_string();
-            by_warning.push(band(partial, label, &|c| c.noise_warning == warned));
-        }
+        by_warning.push(band(partial, "no warning".into(), &|c| {
+            !c.noise_warning && !c.coverage_warning
+        }));
+        by_warning.push(band(partial, "noisy".into(), &|c| c.noise_warning));
+        by_warning.push(band(partial, "unseen surface".into(), &|c| {
+            c.coverage_warning
+        }));
     }
     (by_ratio, by_warning)
 }
@@ -254,11 +262,11 @@ impl Report for SyntheticReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,noise_warning\n",
+            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,noise_warning,coverage_warning\n",
         );
         for c in &self.cases {
             s += &format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 c.seed,
                 c.partial,
                 c.noise,
@@ -271,7 +279,8 @@ impl Report for SyntheticReport {
                 c.eps,
                 c.t_total_ms,
                 c.noise_ratio,
-                c.noise_warning
+                c.noise_warning,
+                c.coverage_warning
             );
         }
         s
@@ -341,8 +350,8 @@ impl Report for SyntheticReport {
                 100.0 * c.rate
             );
         }
-        md += "\nBy the noise against the shape: the true noise sigma over the true shape's smallest half-axis (min of a1, a2, a3), and whether the fit carried the noise warning (its own estimate of the same ratio at or above `fit::NOISE_WARNING_RATIO`):\n\n| cloud | band | cases | success |\n|---|---|---:|---:|\n";
-        for b in self.by_noise_ratio.iter().chain(&self.by_noise_warning) {
+        md += "\nBy the noise against the shape: the true noise sigma over the true shape's smallest half-axis (min of a1, a2, a3), and by the fit's warnings: `noisy` (its own estimate of the same ratio at or above `fit::NOISE_WARNING_RATIO`) and `unseen surface` (with the viewpoint, less than `fit::coverage::MIN_VISIBLE_COVERAGE` of the fitted surface facing it has points on it); a fit can carry both:\n\n| cloud | band | cases | success |\n|---|---|---:|---:|\n";
+        for b in self.by_noise_ratio.iter().chain(&self.by_warning) {
             md += &format!(
                 "| {} | {} | {} | {}/{} ({:.0}%) |\n",
                 if b.partial { "partial" } else { "full" },

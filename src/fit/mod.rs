@@ -23,6 +23,7 @@
 //! point set of the evaluator, each start names its cloud's set), so one batched
 //! evaluation per solver iteration serves every cloud; [`fit`] is a batch of one.
 
+pub mod coverage;
 pub mod free_space;
 pub mod ground_truth;
 pub mod starts;
@@ -106,6 +107,10 @@ pub struct FitOptions {
     /// in the camera's own frame). The space between it and every point is empty, so a
     /// candidate that puts solid there pays for it (see [`free_space`]).
     pub viewpoint: Option<DVec3>,
+    /// with a viewpoint: how many other downsampling seeds to try when the fit leaves most
+    /// of its visible surface without points (see `retry_unseen_surfaces` in this
+    /// module); 0 turns the retries off, the paper's method never retries
+    pub unseen_surface_retries: u64,
 }
 
 impl Default for FitOptions {
@@ -126,6 +131,7 @@ impl Default for FitOptions {
             known_axis: None,
             known_a3: None,
             viewpoint: None,
+            unseen_surface_retries: UNSEEN_SURFACE_RETRIES,
         }
     }
 }
@@ -170,6 +176,10 @@ pub struct Quality {
     /// distance of the points to the surface (the standard deviation for Gaussian noise,
     /// unmoved by outliers)
     pub noise_sigma: f64,
+    /// with a viewpoint: the fraction of the fitted surface the sensor would have seen
+    /// that has points at its depth (see [`coverage`]); absent without one
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub visible_coverage: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
@@ -323,6 +333,17 @@ pub fn fit_batch(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
+    let mut results = fit_batch_once(evaluator, clouds)?;
+    refit_without_inconsistent_viewpoints(evaluator, clouds, &mut results)?;
+    retry_unseen_surfaces(evaluator, clouds, &mut results)?;
+    Ok(results)
+}
+
+/// [`fit_batch`] without its checks of the finished fits.
+fn fit_batch_once(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
     let start = Instant::now();
     let mut results: Vec<Option<Result<FitReport, FitError>>> =
         (0..clouds.len()).map(|_| None).collect();
@@ -350,12 +371,93 @@ pub fn fit_batch(
             results[*i] = Some(Ok(report));
         }
     }
-    let mut results: Vec<Result<FitReport, FitError>> = results
+    Ok(results
         .into_iter()
         .map(|r| r.expect("every cloud prepared or failed"))
+        .collect())
+}
+
+/// The default of [`FitOptions::unseen_surface_retries`]. Measured on the ground-truth
+/// suite's single views (three seed sets, 270 cases, with the camera's position):
+/// successes 43/40/45 -> 48/44/47 of 90 (noise-free views 25-27 -> 28-29 of 30); the
+/// single views' median fit time unchanged, their 90th percentile 34 -> 45-49 ms.
+pub const UNSEEN_SURFACE_RETRIES: u64 = 3;
+
+/// A fit whose visible surface the points do not cover ([`coverage`]) is almost always
+/// wrong (1 of 75 within tolerance on the suite's single views), and on a noise-free view
+/// often only because its random samples led the starts into a wrong basin. Such a cloud
+/// is fitted again with `unseen_surface_retries` other seeds (one batch), and the covered
+/// fit with the lowest median distance to all points replaces it; when none is covered,
+/// the first fit stands with its warning.
+fn retry_unseen_surfaces(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+    results: &mut [Result<FitReport, FitError>],
+) -> Result<(), FitError> {
+    let uncovered: Vec<usize> = results
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| {
+            r.as_ref().is_ok_and(|r| {
+                r.method == Method::Default
+                    && r.quality
+                        .visible_coverage
+                        .is_some_and(|c| c < coverage::MIN_VISIBLE_COVERAGE)
+            })
+        })
+        .map(|(i, _)| i)
         .collect();
-    refit_without_inconsistent_viewpoints(evaluator, clouds, &mut results)?;
-    Ok(results)
+    if uncovered.is_empty() {
+        return Ok(());
+    }
+    let options: Vec<(usize, FitOptions)> = uncovered
+        .iter()
+        .flat_map(|&i| {
+            (1..=clouds[i].1.unseen_surface_retries).map(move |k| {
+                (
+                    i,
+                    FitOptions {
+                        seed: clouds[i]
+                            .1
+                            .seed
+                            .wrapping_add(k.wrapping_mul(0x9E37_79B9_7F4A_7C15)),
+                        ..clouds[i].1.clone()
+                    },
+                )
+            })
+        })
+        .collect();
+    let batch: Vec<(&[DVec3], &FitOptions)> =
+        options.iter().map(|(i, o)| (clouds[*i].0, o)).collect();
+    let retries = fit_batch_once(evaluator, &batch)?;
+    for &i in &uncovered {
+        let first = results[i].as_ref().expect("uncovered fits are fits");
+        let spent: f64 = first.timing_ms.total;
+        let best = options
+            .iter()
+            .zip(&retries)
+            .filter(|((cloud, _), _)| *cloud == i)
+            .filter_map(|(_, r)| r.as_ref().ok())
+            .filter(|r| {
+                r.quality
+                    .visible_coverage
+                    .is_some_and(|c| c >= coverage::MIN_VISIBLE_COVERAGE)
+                    && r.free_space_violation
+                        .is_none_or(|v| v <= free_space::MAX_VIOLATED_FRACTION)
+            })
+            .min_by(|a, b| {
+                a.quality
+                    .median_distance
+                    .total_cmp(&b.quality.median_distance)
+            })
+            .cloned();
+        if let Some(mut best) = best {
+            // the first fit's time and the retries' (one batch) are the caller's wait
+            best.timing_ms.total += spent;
+            results[i] = Ok(best);
+        }
+    }
+    Ok(())
 }
 
 /// A viewpoint the fit contradicts is not where the sensor was (a cloud in another frame
@@ -439,6 +541,8 @@ struct Prepared<'a> {
     max_overreach: Option<f64>,
     /// Cauchy scale of the final refinement in robust residual scales, if it runs
     refine_scale: Option<f64>,
+    /// the viewpoint in the normalised frame, if given
+    viewpoint: Option<DVec3>,
 }
 
 fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitError> {
@@ -618,6 +722,7 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
         hole_preference,
         max_overreach: (!paper).then_some(MAX_OVERREACH),
         refine_scale: (!paper && o.refine_scale > 0.0).then_some(o.refine_scale),
+        viewpoint: o.viewpoint.map(|v| norm.point(v)),
     })
 }
 
@@ -693,21 +798,23 @@ fn fit_group(
         })
         .collect();
     let chosen = refine_robustly(evaluator, group, chosen, &opts2)?;
+    let mut reports: Vec<FitReport> = group
+        .iter()
+        .zip(&chosen)
+        .enumerate()
+        .map(|(cloud, ((_, p), best))| report(p, best, stage1_iterations[cloud], evaluator))
+        .collect();
+    // the reports' own checks (quality, coverage) count as stage 2
     let t_total = start.elapsed();
-
     let timing = Timing {
         stage1: t1.as_secs_f64() * 1e3,
         stage2: (t_total - t1).as_secs_f64() * 1e3,
         total: t_total.as_secs_f64() * 1e3,
     };
-    Ok(group
-        .iter()
-        .zip(&chosen)
-        .enumerate()
-        .map(|(cloud, ((_, p), best))| {
-            report(p, best, timing.clone(), stage1_iterations[cloud], evaluator)
-        })
-        .collect())
+    for r in &mut reports {
+        r.timing_ms = timing.clone();
+    }
+    Ok(reports)
 }
 
 /// The end of stage 2: each cloud's chosen solution solved again under a Cauchy loss
@@ -902,17 +1009,36 @@ fn noise_warning(shape: &Shape, quality: &Quality) -> Option<String> {
     })
 }
 
+/// The warning of [`coverage::MIN_VISIBLE_COVERAGE`], if it applies.
+fn coverage_warning(quality: &Quality) -> Option<String> {
+    let covered = quality.visible_coverage?;
+    (covered < coverage::MIN_VISIBLE_COVERAGE).then(|| {
+        format!(
+            "unseen surface: only {:.0}% of the fitted surface that faces the viewpoint has \
+             points on it (under {:.0}%): the sensor would have seen the rest, so the fit is \
+             likely a wrong shape, e.g. a body grown into the side the sensor did not see",
+            100.0 * covered,
+            100.0 * coverage::MIN_VISIBLE_COVERAGE
+        )
+    })
+}
+
 /// The report of one cloud's chosen solution, in world units.
 fn report(
     p: &Prepared,
     solution: &Solution,
-    timing_ms: Timing,
     stage1_iterations: usize,
     evaluator: &dyn Evaluator,
 ) -> FitReport {
     let (shape, pose) = p.norm.to_world(&solution.candidate);
-    let quality = quality(&shape, &pose, p.points);
-    let warnings = noise_warning(&shape, &quality).into_iter().collect();
+    let mut quality = quality(&shape, &pose, p.points);
+    quality.visible_coverage = p
+        .viewpoint
+        .map(|v| coverage::visible_coverage(&solution.candidate, &p.stage2_pts, v));
+    let warnings = noise_warning(&shape, &quality)
+        .into_iter()
+        .chain(coverage_warning(&quality))
+        .collect();
     let r = pose.matrix();
     let q = pose.rotation;
     FitReport {
@@ -928,7 +1054,12 @@ fn report(
             quaternion_wxyz: [q.w, q.x, q.y, q.z],
         },
         quality,
-        timing_ms,
+        // set by the caller once every report of the group is done
+        timing_ms: Timing {
+            stage1: 0.0,
+            stage2: 0.0,
+            total: 0.0,
+        },
         iterations: Iterations {
             stage1: stage1_iterations,
             stage2: solution.iterations,
@@ -999,6 +1130,7 @@ pub fn quality(shape: &Shape, pose: &Pose, points: &[DVec3]) -> Quality {
         relative_rms: rms / size,
         inlier_fraction: inliers,
         noise_sigma: 1.4826 * median_euclidean,
+        visible_coverage: None,
     }
 }
 

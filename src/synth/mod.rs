@@ -6,7 +6,7 @@ mod camera;
 mod sampling;
 
 pub use camera::{Camera, DepthImage, Intrinsics, RenderedView, render_view};
-pub use sampling::{add_noise, add_outliers, sample_surface, subsample};
+pub use sampling::{add_noise, add_outliers, sample_surface, sample_surface_on_grid, subsample};
 
 /// A seeded random generator, the same stream on every platform.
 pub type SeededRng = rand::rngs::StdRng;
