@@ -205,6 +205,10 @@ pub struct FitArgs {
     /// camera's own frame): the fit keeps solid out of the space the sensor saw through
     #[arg(long, allow_hyphen_values = true)]
     pub viewpoint: Option<String>,
+    /// with --viewpoint: other downsampling seeds to try when the fit leaves most of the
+    /// surface it shows the sensor without points (0 turns the retries off; at most 16)
+    #[arg(long, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=16))]
+    pub retries: u64,
     /// also write the fitted surface as a PLY mesh with normals
     #[arg(long)]
     pub mesh: Option<PathBuf>,
@@ -419,6 +423,7 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         known_a3: args.a3,
         viewpoint,
         method: args.method,
+        unseen_surface_retries: args.retries,
         ..Default::default()
     };
     let backend = args

@@ -342,4 +342,15 @@ fn a_sampled_view_names_the_viewpoint_that_fit_takes() {
     let json: serde_json::Value = serde_json::from_slice(&fit.stdout).unwrap();
     assert!(!json.to_string().contains("viewpoint ignored"), "{json}");
     assert!(!String::from_utf8_lossy(&fit.stderr).contains("viewpoint ignored"));
+    // the fit drawn from the viewpoint: what share of what it shows the sensor has points
+    let covered = json["quality"]["visible_coverage"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&covered), "{json}");
+    // retries are a small count
+    let bad = bin()
+        .args(["fit", "--viewpoint", &viewpoint, "--retries", "17"])
+        .arg(&cloud)
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("retries"));
 }

@@ -223,6 +223,12 @@ fn a_paper_cloud_as_pcd_and_as_json_gives_the_cli_result() {
     let bad = post_pcd(&c, &server, bytes.clone(), "?viewpoint=0,0");
     assert_eq!(bad.status(), 422);
     assert!(bad.text().unwrap().contains("viewpoint"));
+    // the retries of uncovered fits: a number up to 16
+    let seen = post_pcd(&c, &server, bytes.clone(), "?viewpoint=0,0,-2&retries=0");
+    assert_eq!(seen.status(), 200);
+    let bad = post_pcd(&c, &server, bytes.clone(), "?retries=17");
+    assert_eq!(bad.status(), 422);
+    assert!(bad.text().unwrap().contains("retries"));
 
     // a different seed is a different downsampling
     let other: Value = post_pcd(&c, &server, bytes, "?seed=4").json().unwrap();

@@ -54,11 +54,18 @@ pub struct FitRequestOptions {
     #[param(value_type = Option<Vec<f64>>)]
     #[serde(default, deserialize_with = "viewpoint_from_array_or_text")]
     pub viewpoint: Option<[f64; 3]>,
+    /// with a viewpoint: other downsampling seeds to try when the fit leaves most of the
+    /// surface it shows the sensor without points (default 3, 0 turns them off, at most
+    /// 16); each retry costs about one fit, and only such fits are retried
+    pub retries: Option<u64>,
     /// pipeline: default, or paper (the paper's procedure, a baseline)
     pub method: Option<crate::fit::Method>,
     /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
     pub format: Option<Format>,
 }
+
+/// The most retries a request may ask for (each costs about one fit).
+const MAX_RETRIES: u64 = 16;
 
 /// The axis as a JSON array `[x, y, z]` or as text `"x,y,z"` (query strings).
 fn axis_from_array_or_text<'de, D: serde::Deserializer<'de>>(
@@ -128,6 +135,13 @@ impl FitRequestOptions {
             }
             v => v.map(DVec3::from_array),
         };
+        let retries = self.retries.unwrap_or(defaults.unseen_surface_retries);
+        if retries > MAX_RETRIES {
+            return Err(ApiError::unprocessable(
+                "invalid_option",
+                format!("retries must be at most {MAX_RETRIES}"),
+            ));
+        }
         Ok(FitJob {
             points,
             options: FitOptions {
@@ -138,6 +152,7 @@ impl FitRequestOptions {
                 known_a3: self.a3,
                 viewpoint,
                 method: self.method.unwrap_or_default(),
+                unseen_surface_retries: retries,
                 ..defaults
             },
             backend: self.backend.unwrap_or(Backend::Auto),
