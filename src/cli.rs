@@ -207,7 +207,7 @@ pub struct FitArgs {
     pub viewpoint: Option<String>,
     /// with --viewpoint: other downsampling seeds to try when the fit leaves most of the
     /// surface it shows the sensor without points (0 turns the retries off; at most 16)
-    #[arg(long, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=16))]
+    #[arg(long, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=crate::fit::MAX_UNSEEN_SURFACE_RETRIES))]
     pub retries: u64,
     /// also write the fitted surface as a PLY mesh with normals
     #[arg(long)]

@@ -20,8 +20,11 @@ use glam::{DVec2, DVec3};
 /// of a ring that fills a third of the image, so a 3 x 3 neighbourhood of a truly seen
 /// pixel nearly always holds a point.
 const PIXELS: usize = 32;
-/// Surface samples drawn on the fit (area-uniform, coarse table): several per pixel.
+/// Surface samples drawn on the fit (area-uniform): several per pixel.
 const SURFACE_SAMPLES: usize = 4000;
+/// Side of their area table (`synth::sample_surface_on_grid`): coarse, a sixteenth of the
+/// sampler's default work.
+const AREA_TABLE: usize = 64;
 /// A point within this depth of the fitted surface (normalised units) covers the pixel:
 /// clear of the suite's 2% noise (about 0.03), well short of a grown body's extra depth.
 pub const DEPTH_TOLERANCE: f64 = 0.08;
@@ -53,7 +56,7 @@ pub fn visible_coverage(candidate: &Candidate, points: &[DVec3], viewpoint: DVec
         &candidate.shape,
         &candidate.pose,
         SURFACE_SAMPLES,
-        64,
+        AREA_TABLE,
         &mut rng,
     );
     let fitted: Vec<(DVec2, f64)> = surface.iter().filter_map(|p| project(*p)).collect();

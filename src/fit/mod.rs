@@ -379,9 +379,11 @@ fn fit_batch_once(
 
 /// The default of [`FitOptions::unseen_surface_retries`]. Measured on the ground-truth
 /// suite's single views (three seed sets, 270 cases, with the camera's position):
-/// successes 43/40/45 -> 48/44/47 of 90 (noise-free views 25-27 -> 28-29 of 30); the
+/// successes 43/40/45 -> 48/44/47 of 90 (noise-free views 25-26 -> 28-29 of 30); the
 /// single views' median fit time unchanged, their 90th percentile 34 -> 45-49 ms.
 pub const UNSEEN_SURFACE_RETRIES: u64 = 3;
+/// The most retries the CLI and the service accept (each costs about one fit).
+pub const MAX_UNSEEN_SURFACE_RETRIES: u64 = 16;
 
 /// A fit whose visible surface the points do not cover ([`coverage`]) is almost always
 /// wrong (1 of 75 within tolerance on the suite's single views), and on a noise-free view

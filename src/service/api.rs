@@ -64,9 +64,6 @@ pub struct FitRequestOptions {
     pub format: Option<Format>,
 }
 
-/// The most retries a request may ask for (each costs about one fit).
-const MAX_RETRIES: u64 = 16;
-
 /// The axis as a JSON array `[x, y, z]` or as text `"x,y,z"` (query strings).
 fn axis_from_array_or_text<'de, D: serde::Deserializer<'de>>(
     d: D,
@@ -136,10 +133,13 @@ impl FitRequestOptions {
             v => v.map(DVec3::from_array),
         };
         let retries = self.retries.unwrap_or(defaults.unseen_surface_retries);
-        if retries > MAX_RETRIES {
+        if retries > crate::fit::MAX_UNSEEN_SURFACE_RETRIES {
             return Err(ApiError::unprocessable(
                 "invalid_option",
-                format!("retries must be at most {MAX_RETRIES}"),
+                format!(
+                    "retries must be at most {}",
+                    crate::fit::MAX_UNSEEN_SURFACE_RETRIES
+                ),
             ));
         }
         Ok(FitJob {
