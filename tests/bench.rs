@@ -132,6 +132,8 @@ fn bench_synthetic_and_scaling_write_every_field() {
             "errors_partial",
             "by_noise_ratio",
             "by_warning",
+            "full_pose_rate",
+            "partial_pose_rate",
         ],
     );
     let cases = v["cases"].as_array().unwrap();

@@ -85,10 +85,14 @@ pub struct Errors {
     pub eps: f64,
 }
 
+/// The success bounds on the pose: centre error / size, and hole-axis error in degrees.
+pub const CENTRE_BOUND: f64 = 0.05;
+pub const AXIS_BOUND_DEGREES: f64 = 5.0;
+
 impl Errors {
     pub fn success(&self) -> bool {
-        self.centre < 0.05
-            && self.axis_degrees < 5.0
+        self.centre < CENTRE_BOUND
+            && self.axis_degrees < AXIS_BOUND_DEGREES
             && self.sizes < 0.10
             && self.a4 < 0.10
             && self.eps < 0.15
