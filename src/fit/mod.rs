@@ -1018,7 +1018,8 @@ fn coverage_warning(quality: &Quality) -> Option<String> {
         format!(
             "unseen surface: only {:.0}% of the fitted surface that faces the viewpoint has \
              points on it (under {:.0}%): the sensor would have seen the rest, so the fit is \
-             likely a wrong shape, e.g. a body grown into the side the sensor did not see",
+             likely a wrong shape, e.g. a body grown into the side the sensor did not see \
+             (or the viewpoint is not where the sensor was)",
             100.0 * covered,
             100.0 * coverage::MIN_VISIBLE_COVERAGE
         )
