@@ -739,6 +739,35 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
     ] {
         assert!(metrics.contains(name), "{name} missing from:\n{metrics}");
     }
+    // a fit with a warning is counted by the warning's kind: a thin ring (a3 = 1 cm)
+    // under 6 mm of noise
+    let shape = Shape::new(0.05, 0.05, 0.01, 2.0, 1.0, 1.0);
+    let mut rng = supertoroid::synth::rng(5);
+    let mut points = supertoroid::synth::sample_surface(&shape, &Pose::default(), 2000, &mut rng);
+    supertoroid::synth::add_noise(&mut points, 0.006, &mut rng);
+    let points: Vec<[f64; 3]> = points.iter().map(|p| p.to_array()).collect();
+    let fit: Value = c
+        .post(server.url("/v1/fit"))
+        .json(&json!({ "points": points }))
+        .send()
+        .unwrap()
+        .json()
+        .unwrap();
+    assert!(
+        fit["warnings"][0].as_str().unwrap().starts_with("noisy"),
+        "{fit}"
+    );
+    let metrics = c
+        .get(server.url("/metrics"))
+        .send()
+        .unwrap()
+        .text()
+        .unwrap();
+    let counted = "supertoroid_fit_warnings_total{kind=\"noisy_for_this_shape\"} 1";
+    assert!(
+        metrics.contains(counted),
+        "{counted} missing from:\n{metrics}"
+    );
 
     let doc: Value = c
         .get(server.url("/openapi.json"))

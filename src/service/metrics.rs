@@ -28,6 +28,11 @@ pub struct CodeLabel {
     pub code: String,
 }
 
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct WarningLabel {
+    pub kind: String,
+}
+
 pub struct Metrics {
     registry: Registry,
     pub requests: Family<RouteStatus, Counter>,
@@ -36,6 +41,7 @@ pub struct Metrics {
     pub points: Histogram,
     pub queue_depth: Gauge,
     pub errors: Family<CodeLabel, Counter>,
+    pub warnings: Family<WarningLabel, Counter>,
 }
 
 impl Default for Metrics {
@@ -57,6 +63,7 @@ impl Metrics {
         let points = Histogram::new(exponential_buckets(16.0, 4.0, 10));
         let queue_depth = Gauge::default();
         let errors = Family::<CodeLabel, Counter>::default();
+        let warnings = Family::<WarningLabel, Counter>::default();
         registry.register(
             "http_requests",
             "HTTP requests by route and status",
@@ -83,6 +90,12 @@ impl Metrics {
             queue_depth.clone(),
         );
         registry.register("errors", "Error responses by code", errors.clone());
+        registry.register(
+            "fit_warnings",
+            "Fits that carried a warning, by kind (noisy_for_this_shape, unseen_surface, \
+             viewpoint_ignored): a rising rate is a sensor or set-up to look at",
+            warnings.clone(),
+        );
         Self {
             registry,
             requests,
@@ -91,6 +104,7 @@ impl Metrics {
             points,
             queue_depth,
             errors,
+            warnings,
         }
     }
 
@@ -107,6 +121,13 @@ impl Metrics {
                 .observe(ms / 1e3);
         }
         self.points.observe(report.points.input as f64);
+        for warning in &report.warnings {
+            self.warnings
+                .get_or_create(&WarningLabel {
+                    kind: warning_kind(warning),
+                })
+                .inc();
+        }
     }
 
     pub fn encode(&self) -> String {
@@ -114,4 +135,15 @@ impl Metrics {
         let _ = prometheus_client::encoding::text::encode(&mut out, &self.registry);
         out
     }
+}
+
+/// A warning's kind for the metrics label: its documented prefix (the text before the
+/// first colon) in snake case, e.g. "unseen surface: ..." -> `unseen_surface`.
+fn warning_kind(warning: &str) -> String {
+    warning
+        .split(':')
+        .next()
+        .unwrap_or(warning)
+        .trim()
+        .replace(' ', "_")
 }
