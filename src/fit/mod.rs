@@ -17,7 +17,13 @@
 //!
 //! With a viewpoint (where the depth sensor was), both stages also carry free-space
 //! points in front of the sampled points ([`free_space`]), and a fit that contradicts
-//! its viewpoint is redone without it, with a warning.
+//! its viewpoint is redone without it, with a warning. The finished fit is then drawn
+//! from the viewpoint ([`coverage`]): one that shows the sensor surface without points
+//! is fitted again with other seeds, or reported with a warning.
+//!
+//! The report (`report`, re-exported here: [`FitReport`], [`Quality`], [`quality`])
+//! carries the fit in world units, its quality against every input point, its noise
+//! estimate, and the warnings of a fit not to take at face value.
 //!
 //! [`fit_batch`] runs both stages for many clouds in lockstep (each cloud's sample is a
 //! point set of the evaluator, each start names its cloud's set), so one batched
@@ -26,14 +32,20 @@
 pub mod coverage;
 pub mod free_space;
 pub mod ground_truth;
+mod report;
 pub mod starts;
 
+pub use report::{
+    BackendOut, FitReport, Iterations, NOISE_WARNING_RATIO, PointsOut, PoseOut, Quality, Timing,
+    parse_report_json, quality,
+};
+use report::{coverage_warning, noise_warning};
+
 use crate::eval::{Candidate, EvalError, Evaluator, Loss, Normalization, PointSet};
-use crate::model::{Pose, Shape, meridian_distance, meridian_residual_with_gradient};
+use crate::model::{Pose, Shape};
 use crate::solve::{Bounds, Solution, SolverOptions, Stop, solve_on};
 use crate::synth;
 use glam::{DMat3, DQuat, DVec3};
-use serde::Serialize;
 use std::time::Instant;
 
 /// The a4 reward of the paper's procedure (its stage-2 term for a wider hole).
@@ -154,82 +166,6 @@ impl From<EvalError> for FitError {
     fn from(e: EvalError) -> Self {
         FitError::Evaluator(e.to_string())
     }
-}
-
-#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
-pub struct PoseOut {
-    pub translation: [f64; 3],
-    /// row-major R, world = R·canonical + t
-    pub rotation: [[f64; 3]; 3],
-    pub quaternion_wxyz: [f64; 4],
-}
-
-#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
-pub struct Quality {
-    pub rms_distance: f64,
-    pub median_distance: f64,
-    /// rms distance / object size
-    pub relative_rms: f64,
-    /// fraction of the input within 2% of the object size of the surface
-    pub inlier_fraction: f64,
-    /// robust estimate of the sensor noise: 1.4826 · the median first-order Euclidean
-    /// distance of the points to the surface (the standard deviation for Gaussian noise,
-    /// unmoved by outliers)
-    pub noise_sigma: f64,
-    /// with a viewpoint: the fraction of the fitted surface the sensor would have seen
-    /// that has points at its depth (see [`coverage`]); absent without one
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub visible_coverage: Option<f64>,
-}
-
-#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
-pub struct Timing {
-    pub stage1: f64,
-    pub stage2: f64,
-    pub total: f64,
-}
-
-#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
-pub struct Iterations {
-    pub stage1: usize,
-    pub stage2: usize,
-}
-
-#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
-pub struct BackendOut {
-    pub kind: String,
-    pub adapter: String,
-}
-
-#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
-pub struct PointsOut {
-    pub input: usize,
-    pub stage1: usize,
-    pub stage2: usize,
-}
-
-/// The result of `supertoroid fit` (and of the service), documented in the README.
-#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
-pub struct FitReport {
-    pub method: Method,
-    pub shape: Shape,
-    pub pose: PoseOut,
-    pub quality: Quality,
-    pub timing_ms: Timing,
-    pub iterations: Iterations,
-    pub backend: BackendOut,
-    pub points: PointsOut,
-    /// what the caller should know about this fit (e.g. a viewpoint that was ignored);
-    /// absent when there is nothing
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    #[schema(value_type = Option<Vec<String>>)]
-    pub warnings: Vec<String>,
-    #[serde(skip)]
-    pub fitted: (Shape, Pose),
-    /// the fraction of the stage-2 free-space points that lie inside the fit (see
-    /// [`free_space::violated_fraction`]); None without a viewpoint
-    #[serde(skip)]
-    pub free_space_violation: Option<f64>,
 }
 
 /// Rejects clouds no fit can work on. Returns the principal axes (columns, by decreasing
@@ -983,49 +919,6 @@ fn stage1_finalists(solutions: &[&Solution], p: &Prepared) -> Vec<Candidate> {
     finalists
 }
 
-/// Noise ([`Quality::noise_sigma`]) above this fraction of the fitted shape's smallest
-/// half-axis (min of a1, a2, a3) leaves its sizes and eps unreliable, and the report says
-/// so. Measured on the ground-truth suite (540 cases, seeds 10000, 20000, 30000): full
-/// clouds below the ratio 183 of 184 fits within tolerance, at or above it 45 of 86;
-/// single views 118 of 226 and 10 of 44 (0.2: full 207 of 219 below; 0.1: 135 of 136
-/// but 134 warned). No estimator tried (meridian, exact Euclidean and curvature-corrected
-/// Euclidean distance; squared, Huber and Cauchy loss) meets the tolerances on most of
-/// the warned cases even started at the true parameters: there the noise is the limit,
-/// not the search.
-pub const NOISE_WARNING_RATIO: f64 = 0.15;
-
-/// The warning of [`NOISE_WARNING_RATIO`], if it applies.
-fn noise_warning(shape: &Shape, quality: &Quality) -> Option<String> {
-    let thinnest = shape.a1.min(shape.a2).min(shape.a3);
-    let ratio = quality.noise_sigma / thinnest;
-    (ratio >= NOISE_WARNING_RATIO).then(|| {
-        format!(
-            "noisy for this shape: the noise (sigma about {:.3e}) is {:.0}% of the smallest \
-             half-axis ({:.3e}); at {:.0}% or more, sizes and eps are often off by more than \
-             10% and 0.15 (on full clouds, centre and hole axis still hold)",
-            quality.noise_sigma,
-            100.0 * ratio,
-            thinnest,
-            100.0 * NOISE_WARNING_RATIO
-        )
-    })
-}
-
-/// The warning of [`coverage::MIN_VISIBLE_COVERAGE`], if it applies.
-fn coverage_warning(quality: &Quality) -> Option<String> {
-    let covered = quality.visible_coverage?;
-    (covered < coverage::MIN_VISIBLE_COVERAGE).then(|| {
-        format!(
-            "unseen surface: only {:.0}% of the fitted surface that faces the viewpoint has \
-             points on it (under {:.0}%): the sensor would have seen the rest, so the fit is \
-             likely a wrong shape, e.g. a body grown into the side the sensor did not see \
-             (or the viewpoint is not where the sensor was)",
-            100.0 * covered,
-            100.0 * coverage::MIN_VISIBLE_COVERAGE
-        )
-    })
-}
-
 /// The report of one cloud's chosen solution, in world units.
 fn report(
     p: &Prepared,
@@ -1101,78 +994,4 @@ fn distinct_basin(a: &Candidate, b: &Candidate) -> bool {
     let turn = x.y.atan2(x.x).rem_euclid(std::f64::consts::FRAC_PI_2);
     let turn = turn.min(std::f64::consts::FRAC_PI_2 - turn);
     turn > 20f64.to_radians()
-}
-
-/// Distances of every input point to the fitted surface, summarised.
-pub fn quality(shape: &Shape, pose: &Pose, points: &[DVec3]) -> Quality {
-    use rayon::prelude::*;
-    let mut d: Vec<f64> = points
-        .par_iter()
-        .map(|p| meridian_distance(shape, pose.to_canonical(*p)).distance)
-        .collect();
-    let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len().max(1) as f64).sqrt();
-    let size = shape.size();
-    let inliers = d.iter().filter(|&&x| x <= 0.02 * size).count() as f64 / d.len().max(1) as f64;
-    // the noise from the first-order Euclidean distance |r| / |grad r| (the meridian
-    // distance runs along a ray from the section centre; off a thin section's flat faces
-    // that ray meets the surface at a glancing angle and stretches the noise: 1 mm of
-    // noise on a 2 x 10 cm section reads 1.75 mm), on at most NOISE_SAMPLE evenly spread
-    // points: a median needs no more, and the gradient costs thrice the distance
-    const NOISE_SAMPLE: usize = 2000;
-    let stride = points.len().div_ceil(NOISE_SAMPLE).max(1);
-    let mut euclidean: Vec<f64> = points
-        .par_iter()
-        .step_by(stride)
-        .map(|p| {
-            let g = meridian_residual_with_gradient(shape, pose.to_canonical(*p));
-            let slope = g.d_point.length();
-            let r = g.residual.abs();
-            // (never more than the meridian distance, itself a distance to a surface point)
-            if slope > 1.0 { r / slope } else { r }
-        })
-        .collect();
-    Quality {
-        rms_distance: rms,
-        median_distance: median(&mut d),
-        relative_rms: rms / size,
-        inlier_fraction: inliers,
-        noise_sigma: 1.4826 * median(&mut euclidean),
-        visible_coverage: None,
-    }
-}
-
-/// The upper median (0 for no values); reorders `values`.
-fn median(values: &mut [f64]) -> f64 {
-    if values.is_empty() {
-        return 0.0;
-    }
-    let half = values.len() / 2;
-    *values.select_nth_unstable_by(half, f64::total_cmp).1
-}
-
-/// Reads shape and pose back from the JSON of a [`FitReport`] (what `supertoroid fit`
-/// prints and the service answers): `shape`, `pose.translation`, `pose.quaternion_wxyz`.
-pub fn parse_report_json(bytes: &[u8]) -> Result<(Shape, Pose), String> {
-    #[derive(serde::Deserialize)]
-    struct PoseIn {
-        translation: [f64; 3],
-        quaternion_wxyz: [f64; 4],
-    }
-    #[derive(serde::Deserialize)]
-    struct ReportIn {
-        shape: Shape,
-        pose: PoseIn,
-    }
-    let report: ReportIn = serde_json::from_slice(bytes).map_err(|e| e.to_string())?;
-    report.shape.validate()?;
-    let [w, x, y, z] = report.pose.quaternion_wxyz;
-    let q = glam::DQuat::from_xyzw(x, y, z, w);
-    if !q.is_finite() || q.length() < 1e-9 || !report.pose.translation.iter().all(|v| v.is_finite())
-    {
-        return Err("pose has a non-finite or zero quaternion or translation".into());
-    }
-    Ok((
-        report.shape,
-        Pose::new(q.normalize(), DVec3::from_array(report.pose.translation)),
-    ))
 }

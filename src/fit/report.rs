@@ -1,0 +1,201 @@
+//! What a fit tells its caller: the report (`supertoroid fit`'s JSON and the service's
+//! answer, documented in the README), the quality of the fit against all input points,
+//! and the warnings a fit carries when its numbers should not be taken at face value.
+
+use super::{Method, coverage};
+use crate::model::{Pose, Shape, meridian_distance, meridian_residual_with_gradient};
+use glam::DVec3;
+use serde::Serialize;
+
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct PoseOut {
+    pub translation: [f64; 3],
+    /// row-major R, world = R·canonical + t
+    pub rotation: [[f64; 3]; 3],
+    pub quaternion_wxyz: [f64; 4],
+}
+
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct Quality {
+    pub rms_distance: f64,
+    pub median_distance: f64,
+    /// rms distance / object size
+    pub relative_rms: f64,
+    /// fraction of the input within 2% of the object size of the surface
+    pub inlier_fraction: f64,
+    /// robust estimate of the sensor noise: 1.4826 · the median first-order Euclidean
+    /// distance of the points to the surface (the standard deviation for Gaussian noise,
+    /// unmoved by outliers)
+    pub noise_sigma: f64,
+    /// with a viewpoint: the fraction of the fitted surface the sensor would have seen
+    /// that has points at its depth (see [`coverage`]); absent without one
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub visible_coverage: Option<f64>,
+}
+
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct Timing {
+    pub stage1: f64,
+    pub stage2: f64,
+    pub total: f64,
+}
+
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct Iterations {
+    pub stage1: usize,
+    pub stage2: usize,
+}
+
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct BackendOut {
+    pub kind: String,
+    pub adapter: String,
+}
+
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct PointsOut {
+    pub input: usize,
+    pub stage1: usize,
+    pub stage2: usize,
+}
+
+/// The result of `supertoroid fit` (and of the service), documented in the README.
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct FitReport {
+    pub method: Method,
+    pub shape: Shape,
+    pub pose: PoseOut,
+    pub quality: Quality,
+    pub timing_ms: Timing,
+    pub iterations: Iterations,
+    pub backend: BackendOut,
+    pub points: PointsOut,
+    /// what the caller should know about this fit (e.g. a viewpoint that was ignored);
+    /// absent when there is nothing
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    #[schema(value_type = Option<Vec<String>>)]
+    pub warnings: Vec<String>,
+    #[serde(skip)]
+    pub fitted: (Shape, Pose),
+    /// the fraction of the stage-2 free-space points that lie inside the fit (see
+    /// [`super::free_space::violated_fraction`]); None without a viewpoint
+    #[serde(skip)]
+    pub free_space_violation: Option<f64>,
+}
+
+/// Noise ([`Quality::noise_sigma`]) above this fraction of the fitted shape's smallest
+/// half-axis (min of a1, a2, a3) leaves its sizes and eps unreliable, and the report says
+/// so. Measured on the ground-truth suite (540 cases, seeds 10000, 20000, 30000): full
+/// clouds below the ratio 183 of 184 fits within tolerance, at or above it 45 of 86;
+/// single views 118 of 226 and 10 of 44 (0.2: full 207 of 219 below; 0.1: 135 of 136
+/// but 134 warned). No estimator tried (meridian, exact Euclidean and curvature-corrected
+/// Euclidean distance; squared, Huber and Cauchy loss) meets the tolerances on most of
+/// the warned cases even started at the true parameters: there the noise is the limit,
+/// not the search.
+pub const NOISE_WARNING_RATIO: f64 = 0.15;
+
+/// The warning of [`NOISE_WARNING_RATIO`], if it applies.
+pub(super) fn noise_warning(shape: &Shape, quality: &Quality) -> Option<String> {
+    let thinnest = shape.a1.min(shape.a2).min(shape.a3);
+    let ratio = quality.noise_sigma / thinnest;
+    (ratio >= NOISE_WARNING_RATIO).then(|| {
+        format!(
+            "noisy for this shape: the noise (sigma about {:.3e}) is {:.0}% of the smallest \
+             half-axis ({:.3e}); at {:.0}% or more, sizes and eps are often off by more than \
+             10% and 0.15 (on full clouds, centre and hole axis still hold)",
+            quality.noise_sigma,
+            100.0 * ratio,
+            thinnest,
+            100.0 * NOISE_WARNING_RATIO
+        )
+    })
+}
+
+/// The warning of [`coverage::MIN_VISIBLE_COVERAGE`], if it applies.
+pub(super) fn coverage_warning(quality: &Quality) -> Option<String> {
+    let covered = quality.visible_coverage?;
+    (covered < coverage::MIN_VISIBLE_COVERAGE).then(|| {
+        format!(
+            "unseen surface: only {:.0}% of the fitted surface that faces the viewpoint has \
+             points on it (under {:.0}%): the sensor would have seen the rest, so the fit is \
+             likely a wrong shape, e.g. a body grown into the side the sensor did not see \
+             (or the viewpoint is not where the sensor was)",
+            100.0 * covered,
+            100.0 * coverage::MIN_VISIBLE_COVERAGE
+        )
+    })
+}
+
+/// Distances of every input point to the fitted surface, summarised.
+pub fn quality(shape: &Shape, pose: &Pose, points: &[DVec3]) -> Quality {
+    use rayon::prelude::*;
+    let mut d: Vec<f64> = points
+        .par_iter()
+        .map(|p| meridian_distance(shape, pose.to_canonical(*p)).distance)
+        .collect();
+    let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len().max(1) as f64).sqrt();
+    let size = shape.size();
+    let inliers = d.iter().filter(|&&x| x <= 0.02 * size).count() as f64 / d.len().max(1) as f64;
+    // the noise from the first-order Euclidean distance |r| / |grad r| (the meridian
+    // distance runs along a ray from the section centre; off a thin section's flat faces
+    // that ray meets the surface at a glancing angle and stretches the noise: 1 mm of
+    // noise on a 2 x 10 cm section reads 1.75 mm), on at most NOISE_SAMPLE evenly spread
+    // points: a median needs no more, and the gradient costs thrice the distance
+    const NOISE_SAMPLE: usize = 2000;
+    let stride = points.len().div_ceil(NOISE_SAMPLE).max(1);
+    let mut euclidean: Vec<f64> = points
+        .par_iter()
+        .step_by(stride)
+        .map(|p| {
+            let g = meridian_residual_with_gradient(shape, pose.to_canonical(*p));
+            let slope = g.d_point.length();
+            let r = g.residual.abs();
+            // (never more than the meridian distance, itself a distance to a surface point)
+            if slope > 1.0 { r / slope } else { r }
+        })
+        .collect();
+    Quality {
+        rms_distance: rms,
+        median_distance: median(&mut d),
+        relative_rms: rms / size,
+        inlier_fraction: inliers,
+        noise_sigma: 1.4826 * median(&mut euclidean),
+        visible_coverage: None,
+    }
+}
+
+/// The upper median (0 for no values); reorders `values`.
+fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let half = values.len() / 2;
+    *values.select_nth_unstable_by(half, f64::total_cmp).1
+}
+
+/// Reads shape and pose back from the JSON of a [`FitReport`] (what `supertoroid fit`
+/// prints and the service answers): `shape`, `pose.translation`, `pose.quaternion_wxyz`.
+pub fn parse_report_json(bytes: &[u8]) -> Result<(Shape, Pose), String> {
+    #[derive(serde::Deserialize)]
+    struct PoseIn {
+        translation: [f64; 3],
+        quaternion_wxyz: [f64; 4],
+    }
+    #[derive(serde::Deserialize)]
+    struct ReportIn {
+        shape: Shape,
+        pose: PoseIn,
+    }
+    let report: ReportIn = serde_json::from_slice(bytes).map_err(|e| e.to_string())?;
+    report.shape.validate()?;
+    let [w, x, y, z] = report.pose.quaternion_wxyz;
+    let q = glam::DQuat::from_xyzw(x, y, z, w);
+    if !q.is_finite() || q.length() < 1e-9 || !report.pose.translation.iter().all(|v| v.is_finite())
+    {
+        return Err("pose has a non-finite or zero quaternion or translation".into());
+    }
+    Ok((
+        report.shape,
+        Pose::new(q.normalize(), DVec3::from_array(report.pose.translation)),
+    ))
+}
