@@ -92,6 +92,15 @@ fn gpu_config() -> ServiceConfig {
     }
 }
 
+/// The Prometheus text the server exposes now.
+fn metrics_text(c: &Client, server: &Server) -> String {
+    c.get(server.url("/metrics"))
+        .send()
+        .unwrap()
+        .text()
+        .unwrap()
+}
+
 fn client() -> Client {
     Client::builder()
         .timeout(std::time::Duration::from_secs(120))
@@ -544,12 +553,7 @@ fn every_bad_input_class_gets_its_status_and_a_json_error() {
     }
     // the server is still serving, and counted the errors by kind
     assert_eq!(c.get(server.url("/healthz")).send().unwrap().status(), 200);
-    let metrics = c
-        .get(server.url("/metrics"))
-        .send()
-        .unwrap()
-        .text()
-        .unwrap();
+    let metrics = metrics_text(&c, &server);
     assert!(
         metrics.contains("supertoroid_errors_total{code=\"too_few_points\"} 1"),
         "{metrics}"
@@ -726,12 +730,7 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
     assert_eq!(ready["backend"], "cpu");
     let index = c.get(server.url("/")).send().unwrap().text().unwrap();
     assert!(index.contains("supertoroid") && index.contains("/openapi.json"));
-    let metrics = c
-        .get(server.url("/metrics"))
-        .send()
-        .unwrap()
-        .text()
-        .unwrap();
+    let metrics = metrics_text(&c, &server);
     for name in [
         "supertoroid_http_requests_total{route=\"/healthz\",status=\"200\"} 1",
         "supertoroid_queue_depth",
@@ -742,9 +741,9 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
     // a fit with a warning is counted by the warning's kind: a thin ring (a3 = 1 cm)
     // under 6 mm of noise
     let shape = Shape::new(0.05, 0.05, 0.01, 2.0, 1.0, 1.0);
-    let mut rng = supertoroid::synth::rng(5);
-    let mut points = supertoroid::synth::sample_surface(&shape, &Pose::default(), 2000, &mut rng);
-    supertoroid::synth::add_noise(&mut points, 0.006, &mut rng);
+    let mut rng = synth::rng(5);
+    let mut points = synth::sample_surface(&shape, &Pose::default(), 2000, &mut rng);
+    synth::add_noise(&mut points, 0.006, &mut rng);
     let points: Vec<[f64; 3]> = points.iter().map(|p| p.to_array()).collect();
     let fit: Value = c
         .post(server.url("/v1/fit"))
@@ -757,12 +756,7 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
         fit["warnings"][0].as_str().unwrap().starts_with("noisy"),
         "{fit}"
     );
-    let metrics = c
-        .get(server.url("/metrics"))
-        .send()
-        .unwrap()
-        .text()
-        .unwrap();
+    let metrics = metrics_text(&c, &server);
     let counted = "supertoroid_fit_warnings_total{kind=\"noisy_for_this_shape\"} 1";
     assert!(
         metrics.contains(counted),
