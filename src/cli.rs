@@ -201,6 +201,10 @@ pub struct FitArgs {
     /// tell how thick an object is
     #[arg(long)]
     pub a3: Option<f64>,
+    /// known shape parameters, held fixed: name=value pairs, e.g. a1=0.05,a4=2.1 (sizes in
+    /// the cloud's units; a product's dimensions)
+    #[arg(long)]
+    pub known: Option<String>,
     /// where the depth sensor was, x,y,z in the cloud's frame (0,0,0 for a cloud in the
     /// camera's own frame): the fit keeps solid out of the space the sensor saw through
     #[arg(long, allow_hyphen_values = true)]
@@ -420,7 +424,12 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         stage1_points: args.stage1_points,
         stage2_points: args.stage2_points,
         known_axis,
-        known_a3: args.a3,
+        known_shape: args
+            .known
+            .as_deref()
+            .map_or(Ok([None; 6]), crate::fit::parse_known_shape)
+            .and_then(|known| crate::fit::known_with_a3(known, args.a3))
+            .map_err(Failure::input)?,
         viewpoint,
         method: args.method,
         unseen_surface_retries: args.retries,

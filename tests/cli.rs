@@ -345,6 +345,34 @@ fn a_sampled_view_names_the_viewpoint_that_fit_takes() {
     // the fit drawn from the viewpoint: what share of what it shows the sensor has points
     let covered = json["quality"]["visible_coverage"].as_f64().unwrap();
     assert!((0.0..=1.0).contains(&covered), "{json}");
+    // a product's dimensions, held; a3 may not be given twice
+    let known = bin()
+        .args(["fit", "--backend", "cpu", "--known", "a1=0.05,a2=0.05,a4=2"])
+        .arg(&cloud)
+        .output()
+        .unwrap();
+    assert!(
+        known.status.success(),
+        "{}",
+        String::from_utf8_lossy(&known.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&known.stdout).unwrap();
+    assert!(
+        (json["shape"]["a4"].as_f64().unwrap() - 2.0).abs() < 1e-9,
+        "{json}"
+    );
+    for args in [
+        vec!["--known", "a3=0.02", "--a3", "0.02"],
+        vec!["--known", "a9=1"],
+    ] {
+        let bad = bin().arg("fit").args(&args).arg(&cloud).output().unwrap();
+        assert_eq!(bad.status.code(), Some(2), "{args:?}");
+        let stderr = String::from_utf8_lossy(&bad.stderr);
+        assert!(
+            stderr.contains("a3 given twice") || stderr.contains("a9"),
+            "{stderr}"
+        );
+    }
     // retries are a small count
     let bad = bin()
         .args(["fit", "--viewpoint", &viewpoint, "--retries", "17"])

@@ -232,6 +232,17 @@ fn a_paper_cloud_as_pcd_and_as_json_gives_the_cli_result() {
     let bad = post_pcd(&c, &server, bytes.clone(), "?viewpoint=0,0");
     assert_eq!(bad.status(), 422);
     assert!(bad.text().unwrap().contains("viewpoint"));
+    // known dimensions, in a query string; a bad one is named
+    let known: Value = post_pcd(&c, &server, bytes.clone(), "?known=a4:2,a3:0.02")
+        .json()
+        .unwrap();
+    assert!(
+        (known["shape"]["a4"].as_f64().unwrap() - 2.0).abs() < 1e-9,
+        "{known}"
+    );
+    let bad = post_pcd(&c, &server, bytes.clone(), "?known=a9:1");
+    assert_eq!(bad.status(), 422);
+    assert!(bad.text().unwrap().contains("a9"));
     // the retries of uncovered fits: a number up to 16
     let seen = post_pcd(&c, &server, bytes.clone(), "?viewpoint=0,0,-2&retries=0");
     assert_eq!(seen.status(), 200);
@@ -757,6 +768,18 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
         "{fit}"
     );
     let metrics = metrics_text(&c, &server);
+    // known dimensions as a JSON object in the options
+    let held: Value = c
+        .post(server.url("/v1/fit"))
+        .json(&json!({ "points": points, "options": { "known": { "a3": 0.01 } } }))
+        .send()
+        .unwrap()
+        .json()
+        .unwrap();
+    assert!(
+        (held["shape"]["a3"].as_f64().unwrap() - 0.01).abs() < 1e-12,
+        "{held}"
+    );
     let counted = "supertoroid_fit_warnings_total{kind=\"noisy_for_this_shape\"} 1";
     assert!(
         metrics.contains(counted),

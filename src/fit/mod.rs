@@ -51,6 +51,49 @@ use std::time::Instant;
 /// The a4 reward of the paper's procedure (its stage-2 term for a wider hole).
 pub const PAPER_A4_REWARD: f64 = 1e-4;
 
+/// The shape parameters' names, in their order.
+pub const SHAPE_NAMES: [&str; 6] = ["a1", "a2", "a3", "a4", "eps1", "eps2"];
+
+/// Reads known shape parameters from text, `name=value` pairs separated by commas (`:`
+/// works as well as `=`, for query strings): `"a1=0.05,a4=2.1"` -> a1 and a4 known.
+pub fn parse_known_shape(text: &str) -> Result<[Option<f64>; 6], String> {
+    let mut known = [None; 6];
+    for pair in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (name, value) = pair
+            .split_once(['=', ':'])
+            .ok_or_else(|| format!("known shape: '{pair}' is not name=value"))?;
+        let i = SHAPE_NAMES
+            .iter()
+            .position(|n| *n == name.trim())
+            .ok_or_else(|| {
+                format!("known shape: '{name}' is not one of a1, a2, a3, a4, eps1, eps2")
+            })?;
+        let value: f64 = value
+            .trim()
+            .parse()
+            .map_err(|_| format!("known shape: '{value}' is not a number"))?;
+        if known[i].replace(value).is_some() {
+            return Err(format!("known shape: {name} given twice"));
+        }
+    }
+    Ok(known)
+}
+
+/// Adds an a3 given on its own (the `a3` option) to known shape parameters; a3 given
+/// both ways is an error.
+pub fn known_with_a3(
+    mut known: [Option<f64>; 6],
+    a3: Option<f64>,
+) -> Result<[Option<f64>; 6], String> {
+    if let Some(a3) = a3 {
+        if known[2].is_some() {
+            return Err("a3 given twice (as a3 and in known)".into());
+        }
+        known[2] = Some(a3);
+    }
+    Ok(known)
+}
+
 /// Fewest points a fit accepts.
 pub const MIN_POINTS: usize = 20;
 
@@ -112,9 +155,11 @@ pub struct FitOptions {
     pub eps_max: f64,
     /// prior: the hole axis in world coordinates, if known (e.g. "on a table, hole up")
     pub known_axis: Option<DVec3>,
-    /// prior: the section half-height a3 in world units, if known (a one-sided view
-    /// cannot tell how thick an object is; a product's dimensions can)
-    pub known_a3: Option<f64>,
+    /// prior: shape parameters known in advance (a product's dimensions), in the order
+    /// a1 a2 a3 a4 eps1 eps2, sizes in world units; each one given is held fixed. A
+    /// one-sided view cannot tell how thick an object is, nor how wide its hole; a
+    /// catalogue can. See [`parse_known_shape`] for the text form.
+    pub known_shape: [Option<f64>; 6],
     /// where the depth sensor that saw the cloud was (world units; the origin for a cloud
     /// in the camera's own frame). The space between it and every point is empty, so a
     /// candidate that puts solid there pays for it (see [`free_space`]).
@@ -141,7 +186,7 @@ impl Default for FitOptions {
             eps_min: 0.1,
             eps_max: 2.0,
             known_axis: None,
-            known_a3: None,
+            known_shape: [None; 6],
             viewpoint: None,
             unseen_surface_retries: UNSEEN_SURFACE_RETRIES,
         }
@@ -481,6 +526,8 @@ struct Prepared<'a> {
     refine_scale: Option<f64>,
     /// the viewpoint in the normalised frame, if given
     viewpoint: Option<DVec3>,
+    /// the known shape parameters (normalised sizes), held fixed
+    known: [Option<f64>; 6],
 }
 
 fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitError> {
@@ -617,18 +664,50 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
         opts1.fixed[9] = true;
         opts1.fixed[10] = true;
     }
-    if let Some(a3) = o.known_a3 {
-        let a3 = a3 / norm.scale;
-        if !(a3.is_finite() && (0.002..=5.0).contains(&a3)) {
+    // known shape parameters: validated, put into every start and held fixed
+    let bounds_box = o.bounds();
+    let mut known = [None; 6];
+    for (i, value) in o.known_shape.iter().enumerate() {
+        let Some(value) = *value else { continue };
+        // sizes go into the normalised frame
+        let v = if i < 3 { value / norm.scale } else { value };
+        let plausible = match i {
+            0..3 => (0.002..=5.0).contains(&v),
+            3 => (0.0..bounds_box.upper[3]).contains(&v),
+            _ => (o.eps_min..=o.eps_max).contains(&v),
+        };
+        if !(v.is_finite() && plausible) {
             return Err(FitError::InvalidOption(format!(
-                "a3 = {} is not a plausible half-height for a cloud of this size",
-                a3 * norm.scale
+                "{} = {value} is not plausible{}",
+                SHAPE_NAMES[i],
+                match i {
+                    0..3 => " for a cloud of this size",
+                    3 => " (0 <= a4 < 8)",
+                    _ => " (eps within the eps bounds)",
+                }
             )));
         }
         for start in &mut starts {
-            start.shape.a3 = a3;
+            let mut shape = start.shape.to_array();
+            shape[i] = v;
+            start.shape = Shape::from_array(shape);
         }
-        opts1.fixed[2] = true;
+        opts1.fixed[i] = true;
+        known[i] = Some(v);
+    }
+    // with a1 and a2 both held, the in-plane turn cannot trade them any more: each start
+    // also goes a quarter turn about its axis
+    if known[0].is_some() && known[1].is_some() {
+        let turned: Vec<Candidate> = starts
+            .iter()
+            .map(|s| {
+                let mut t = *s;
+                t.pose.rotation =
+                    s.pose.rotation * DQuat::from_rotation_z(std::f64::consts::FRAC_PI_2);
+                t
+            })
+            .collect();
+        starts.extend(turned);
     }
 
     let opts2 = SolverOptions {
@@ -661,6 +740,7 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
         max_overreach: (!paper).then_some(MAX_OVERREACH),
         refine_scale: (!paper && o.refine_scale > 0.0).then_some(o.refine_scale),
         viewpoint: o.viewpoint.map(|v| norm.point(v)),
+        known,
     })
 }
 
@@ -861,6 +941,13 @@ impl Prepared<'_> {
             let extent = half_extents_about(candidate, &self.stage2_pts);
             for (i, e) in extent.to_array().into_iter().enumerate() {
                 bounds.upper[i] = bounds.upper[i].min((limit * e).max(10.0 * bounds.lower[i]));
+            }
+        }
+        // a known size stays what it is, supported or not
+        for (i, v) in self.known.iter().enumerate() {
+            if let Some(v) = *v {
+                bounds.lower[i] = bounds.lower[i].min(0.5 * v);
+                bounds.upper[i] = bounds.upper[i].max(2.0 * v);
             }
         }
         bounds

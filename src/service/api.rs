@@ -48,6 +48,11 @@ pub struct FitRequestOptions {
     pub axis: Option<[f64; 3]>,
     /// prior: the section half-height a3 in the cloud's units (held fixed)
     pub a3: Option<f64>,
+    /// prior: known shape parameters, held fixed: `{"a1": 0.05, "a4": 2.1}` (sizes in the
+    /// cloud's units; a product's dimensions), or in a query string `known=a1:0.05,a4:2.1`
+    #[param(value_type = Option<Object>)]
+    #[serde(default, deserialize_with = "known_from_object_or_text")]
+    pub known: Option<[Option<f64>; 6]>,
     /// where the depth sensor was, [x, y, z] in the cloud's frame ([0, 0, 0] for a cloud in
     /// the camera's own frame; depth frames use the camera by default): the fit keeps
     /// solid out of the space the sensor saw through (in a query string: `viewpoint=0,0,0`)
@@ -62,6 +67,30 @@ pub struct FitRequestOptions {
     pub method: Option<crate::fit::Method>,
     /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
     pub format: Option<Format>,
+}
+
+/// Known shape parameters as a JSON object `{"a1": 0.05}` or as text `"a1:0.05"`.
+fn known_from_object_or_text<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> Result<Option<[Option<f64>; 6]>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Known {
+        Object(std::collections::BTreeMap<String, f64>),
+        Text(String),
+    }
+    let text = match Option::<Known>::deserialize(d)? {
+        None => return Ok(None),
+        Some(Known::Text(t)) => t,
+        Some(Known::Object(m)) => m
+            .iter()
+            .map(|(k, v)| format!("{k}={v:e}"))
+            .collect::<Vec<_>>()
+            .join(","),
+    };
+    crate::fit::parse_known_shape(&text)
+        .map(Some)
+        .map_err(serde::de::Error::custom)
 }
 
 /// The axis as a JSON array `[x, y, z]` or as text `"x,y,z"` (query strings).
@@ -149,7 +178,8 @@ impl FitRequestOptions {
                 stage1_points: limit(self.stage1_points, defaults.stage1_points, "stage1_points")?,
                 stage2_points: limit(self.stage2_points, defaults.stage2_points, "stage2_points")?,
                 known_axis,
-                known_a3: self.a3,
+                known_shape: crate::fit::known_with_a3(self.known.unwrap_or([None; 6]), self.a3)
+                    .map_err(|m| ApiError::unprocessable("invalid_option", m))?,
                 viewpoint,
                 method: self.method.unwrap_or_default(),
                 unseen_surface_retries: retries,
