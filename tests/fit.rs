@@ -812,10 +812,7 @@ fn ninety_percent_where_the_noise_is_under_a_tenth_of_the_thinnest_half_axis() {
     let mut evaluator = CpuEvaluator::new();
     let cases: Vec<(u64, Case)> = suite_cases(|_, _, _| true)
         .into_iter()
-        .filter(|(_, c)| {
-            let thinnest = c.shape.a1.min(c.shape.a2).min(c.shape.a3);
-            c.noise * c.shape.size() < 0.1 * thinnest
-        })
+        .filter(|(_, c)| c.noise * c.shape.size() < 0.1 * c.shape.thinnest_half_axis())
         .collect();
     let (mut successes, mut partial, mut noisy) = (0, 0, 0);
     for (seed, case) in &cases {

@@ -181,8 +181,7 @@ pub fn run(
             a4: e.a4,
             eps: e.eps,
             t_total_ms: report.timing_ms.total,
-            noise_ratio: noise * case.shape.size()
-                / case.shape.a1.min(case.shape.a2).min(case.shape.a3),
+            noise_ratio: noise * case.shape.size() / case.shape.thinnest_half_axis(),
             noise_warning: report.warnings.iter().any(|w| w.starts_with("noisy")),
             coverage_warning: report.warnings.iter().any(|w| w.starts_with("unseen")),
         });

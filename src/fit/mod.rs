@@ -665,7 +665,6 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
         opts1.fixed[10] = true;
     }
     // known shape parameters: validated, put into every start and held fixed
-    let bounds_box = o.bounds();
     let mut known = [None; 6];
     for (i, value) in o.known_shape.iter().enumerate() {
         let Some(value) = *value else { continue };
@@ -673,7 +672,7 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
         let v = if i < 3 { value / norm.scale } else { value };
         let plausible = match i {
             0..3 => (0.002..=5.0).contains(&v),
-            3 => (0.0..bounds_box.upper[3]).contains(&v),
+            3 => (0.0..bounds.upper[3]).contains(&v),
             _ => (o.eps_min..=o.eps_max).contains(&v),
         };
         if !(v.is_finite() && plausible) {
@@ -681,9 +680,9 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
                 "{} = {value} is not plausible{}",
                 SHAPE_NAMES[i],
                 match i {
-                    0..3 => " for a cloud of this size",
-                    3 => " (0 <= a4 < 8)",
-                    _ => " (eps within the eps bounds)",
+                    0..3 => " for a cloud of this size".to_string(),
+                    3 => format!(" (0 <= a4 < {})", bounds.upper[3]),
+                    _ => format!(" (eps within {} and {})", o.eps_min, o.eps_max),
                 }
             )));
         }

@@ -96,7 +96,7 @@ pub const NOISE_WARNING_RATIO: f64 = 0.15;
 
 /// The warning of [`NOISE_WARNING_RATIO`], if it applies.
 pub(super) fn noise_warning(shape: &Shape, quality: &Quality) -> Option<String> {
-    let thinnest = shape.a1.min(shape.a2).min(shape.a3);
+    let thinnest = shape.thinnest_half_axis();
     let ratio = quality.noise_sigma / thinnest;
     (ratio >= NOISE_WARNING_RATIO).then(|| {
         format!(

@@ -85,6 +85,12 @@ impl Shape {
         Ok(())
     }
 
+    /// The smallest of a1, a2, a3: what sensor noise has to be small against for the
+    /// shape to be measurable (see `fit::NOISE_WARNING_RATIO`).
+    pub fn thinnest_half_axis(&self) -> f64 {
+        self.a1.min(self.a2).min(self.a3)
+    }
+
     /// Half-extents of the canonical bounding box: the supertoroid lies within
     /// |x| <= a1(1+a4), |y| <= a2(1+a4), |z| <= a3 (paper, after eq. 3).
     pub fn half_extents(&self) -> DVec3 {
