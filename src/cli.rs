@@ -213,6 +213,10 @@ pub struct FitArgs {
     /// surface it shows the sensor without points (0 turns the retries off; at most 16)
     #[arg(long, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=crate::fit::MAX_UNSEEN_SURFACE_RETRIES))]
     pub retries: u64,
+    /// skip the noise model's polish of noisy fits (faster by about 20-100 ms on such
+    /// clouds; their sizes and eps then carry the noise's bias)
+    #[arg(long)]
+    pub no_noise_model: bool,
     /// also write the fitted surface as a PLY mesh with normals
     #[arg(long)]
     pub mesh: Option<PathBuf>,
@@ -433,6 +437,7 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         viewpoint,
         method: args.method,
         unseen_surface_retries: args.retries,
+        noise_model: !args.no_noise_model,
         ..Default::default()
     };
     let backend = args

@@ -94,11 +94,29 @@ pub struct FitReport {
 /// not the search.
 pub const NOISE_WARNING_RATIO: f64 = 0.15;
 
-/// The warning of [`NOISE_WARNING_RATIO`], if it applies.
-pub(super) fn noise_warning(shape: &Shape, quality: &Quality) -> Option<String> {
+/// The same for a fit without a viewpoint that the noise model ([`super::likelihood`])
+/// polished, whose sigma is the model's own (single views keep the ratio above: there
+/// the model's fits at 0.1-0.2 of the thinnest half-axis were within tolerance in 12 of
+/// 25 cases, above 0.2 in 1 of 17). Measured on the suite's full clouds (270 cases, seeds 10000, 20000,
+/// 30000): 266 within tolerance; the misses had noise at 0.2-0.7 of the thinnest
+/// half-axis, where a fit started at the true parameters also left them.
+pub const NOISE_MODEL_WARNING_RATIO: f64 = 0.5;
+
+/// The warning of [`NOISE_WARNING_RATIO`] ([`NOISE_MODEL_WARNING_RATIO`] for a full
+/// cloud's `noise_modelled` fit), if it applies.
+pub(super) fn noise_warning(
+    shape: &Shape,
+    quality: &Quality,
+    noise_modelled: bool,
+) -> Option<String> {
     let thinnest = shape.thinnest_half_axis();
     let ratio = quality.noise_sigma / thinnest;
-    (ratio >= NOISE_WARNING_RATIO).then(|| {
+    let limit = if noise_modelled {
+        NOISE_MODEL_WARNING_RATIO
+    } else {
+        NOISE_WARNING_RATIO
+    };
+    (ratio >= limit).then(|| {
         format!(
             "noisy for this shape: the noise (sigma about {:.3e}) is {:.0}% of the smallest \
              half-axis ({:.3e}); at {:.0}% or more, sizes and eps are often off by more than \
@@ -106,7 +124,7 @@ pub(super) fn noise_warning(shape: &Shape, quality: &Quality) -> Option<String> 
             quality.noise_sigma,
             100.0 * ratio,
             thinnest,
-            100.0 * NOISE_WARNING_RATIO
+            100.0 * limit
         )
     })
 }
@@ -136,13 +154,28 @@ pub fn quality(shape: &Shape, pose: &Pose, points: &[DVec3]) -> Quality {
     let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len().max(1) as f64).sqrt();
     let size = shape.size();
     let inliers = d.iter().filter(|&&x| x <= 0.02 * size).count() as f64 / d.len().max(1) as f64;
-    // the noise from the first-order Euclidean distance |r| / |grad r| (the meridian
-    // distance runs along a ray from the section centre; off a thin section's flat faces
-    // that ray meets the surface at a glancing angle and stretches the noise: 1 mm of
-    // noise on a 2 x 10 cm section reads 1.75 mm), on at most NOISE_SAMPLE evenly spread
-    // points: a median needs no more, and the gradient costs thrice the distance
-    const NOISE_SAMPLE: usize = 2000;
-    let stride = points.len().div_ceil(NOISE_SAMPLE).max(1);
+    Quality {
+        rms_distance: rms,
+        median_distance: median(&mut d),
+        relative_rms: rms / size,
+        inlier_fraction: inliers,
+        noise_sigma: noise_sigma(shape, pose, points, NOISE_SAMPLE),
+        visible_coverage: None,
+    }
+}
+
+/// At most this many points, evenly spread, estimate [`Quality::noise_sigma`]: a median
+/// needs no more, and the gradient costs thrice the distance.
+pub const NOISE_SAMPLE: usize = 2000;
+
+/// The noise sigma about a fit: 1.4826 · the median first-order Euclidean distance
+/// |r| / |grad r| over at most `sample` evenly spread points. (The meridian distance runs
+/// along a ray from the section centre; off a thin section's flat faces that ray meets
+/// the surface at a glancing angle and stretches the noise: 1 mm of noise on a 2 x 10 cm
+/// section reads 1.75 mm.)
+pub fn noise_sigma(shape: &Shape, pose: &Pose, points: &[DVec3], sample: usize) -> f64 {
+    use rayon::prelude::*;
+    let stride = points.len().div_ceil(sample.max(1)).max(1);
     let mut euclidean: Vec<f64> = points
         .par_iter()
         .step_by(stride)
@@ -154,14 +187,7 @@ pub fn quality(shape: &Shape, pose: &Pose, points: &[DVec3]) -> Quality {
             if slope > 1.0 { r / slope } else { r }
         })
         .collect();
-    Quality {
-        rms_distance: rms,
-        median_distance: median(&mut d),
-        relative_rms: rms / size,
-        inlier_fraction: inliers,
-        noise_sigma: 1.4826 * median(&mut euclidean),
-        visible_coverage: None,
-    }
+    1.4826 * median(&mut euclidean)
 }
 
 /// The upper median (0 for no values); reorders `values`.
