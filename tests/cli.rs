@@ -369,3 +369,32 @@ fn a_sampled_view_names_the_viewpoint_that_fit_takes() {
         assert!(stderr.contains(named), "{args:?}: {stderr}");
     }
 }
+
+/// `fit --no-noise-model` skips the noise model: on a thin ring under heavy noise (sigma
+/// about half of a3) the default fit's section is the model's, and differs from the plain
+/// least-squares one, which the flag gives.
+#[test]
+fn no_noise_model_gives_the_plain_fit() {
+    let cloud = tmp("noisy-ring.xyz");
+    let out = bin()
+        .args([
+            "sample",
+            "--shape",
+            "0.05,0.05,0.01,2,1,1",
+            "--noise",
+            "0.025",
+        ])
+        .args(["--points", "2000", "--seed", "3", "-o"])
+        .arg(&cloud)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let (modelled, _) = fit_json(&[], &cloud);
+    let (plain, _) = fit_json(&["--no-noise-model"], &cloud);
+    let a3 = |j: &serde_json::Value| j["shape"]["a3"].as_f64().unwrap();
+    eprintln!("a3: modelled {}, plain {}", a3(&modelled), a3(&plain));
+    assert!(
+        (a3(&modelled) - 0.01).abs() < (a3(&plain) - 0.01).abs(),
+        "{modelled} vs {plain}"
+    );
+}

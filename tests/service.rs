@@ -250,6 +250,13 @@ fn a_paper_cloud_as_pcd_and_as_json_gives_the_cli_result() {
     assert_eq!(bad.status(), 422);
     assert!(bad.text().unwrap().contains("retries"));
 
+    // the noise model can be turned off, and the option is a boolean
+    let plain = post_pcd(&c, &server, bytes.clone(), "?noise_model=false");
+    assert_eq!(plain.status(), 200);
+    let bad = post_pcd(&c, &server, bytes.clone(), "?noise_model=perhaps");
+    assert_eq!(bad.status(), 422);
+    assert!(bad.text().unwrap().contains("noise_model"));
+
     // a different seed is a different downsampling
     let other: Value = post_pcd(&c, &server, bytes, "?seed=4").json().unwrap();
     assert_ne!(shape_of(&other), shape_of(&from_pcd));
