@@ -711,6 +711,38 @@ mod tests {
         assert!((0.4..0.6).contains(&half), "half sample covers {half}");
     }
 
+    /// From a start with a biased section, the model moves a3 and eps back towards the
+    /// truth; what the caller holds (a known a1, a known hole axis) does not move.
+    #[test]
+    fn refinement_recovers_the_section_and_keeps_what_is_held() {
+        let shape = Shape::new(0.3, 0.3, 0.08, 2.0, 0.6, 1.0);
+        let pose = Pose::new(
+            DQuat::from_scaled_axis(DVec3::new(0.4, 0.1, -0.3)),
+            DVec3::new(0.1, 0.0, -0.05),
+        );
+        let mut rng = crate::synth::rng(11);
+        let mut points = crate::synth::sample_surface(&shape, &pose, 1500, &mut rng);
+        crate::synth::add_noise(&mut points, 0.02, &mut rng);
+        // least squares' kind of bias: a thicker, rounder section
+        let start = Candidate {
+            shape: Shape::new(0.3, 0.3, 0.095, 2.0, 0.8, 1.0),
+            pose,
+        };
+        let limits = Limits {
+            bounds: Bounds::new(1e-3, 5.0, 10.0, 0.1, 2.0),
+            fixed_shape: [true, false, false, false, false, false],
+            fixed_axis: true,
+        };
+        let r = refine(&points, &start, 0.02, 0.05, None, &limits).unwrap();
+        let s = r.candidate.shape;
+        assert!((s.a3 - 0.08).abs() < 0.004, "a3 {}", s.a3);
+        assert!((s.eps1 - 0.6).abs() < 0.08, "eps1 {}", s.eps1);
+        assert!((r.sigma / 0.02 - 1.0).abs() < 0.15, "sigma {}", r.sigma);
+        assert_eq!(s.a1, 0.3);
+        let axis_drift = r.candidate.pose.axis().dot(pose.axis()).abs();
+        assert!(axis_drift > 1.0 - 1e-9, "axis moved: cos {axis_drift}");
+    }
+
     #[test]
     fn the_gradient_matches_differences_of_the_likelihood() {
         let shape = Shape::new(0.3, 0.25, 0.12, 2.0, 0.7, 1.3);
