@@ -216,7 +216,7 @@ fn perimeter(a: f64, b: f64, eps: f64) -> f64 {
 pub const CELL_SIGMAS: f64 = 2.0;
 
 /// Grid size for cells about [`CELL_SIGMAS`] sigmas across, capped at [`MAX_CELLS`].
-pub fn grid_for(shape: &[f64; 6], sigma: f64) -> (usize, usize) {
+fn grid_for(shape: &[f64; 6], sigma: f64) -> (usize, usize) {
     let sigma = CELL_SIGMAS * sigma;
     let [a1, a2, a3, a4, eps1, eps2] = *shape;
     let section = perimeter(a1.max(a2), a3, eps1);
