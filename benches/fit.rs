@@ -81,63 +81,83 @@ fn bench_fit(c: &mut Criterion) {
     group.finish();
 }
 
-fn bench_single_view(c: &mut Criterion) {
-    // the suite's case 10: single view, noise 1% of the size, no outliers
-    let case = supertoroid::fit::ground_truth::make_case(10_010, true, 0.01, 0.0);
-    let mut evaluators = evaluators();
-    let mut group = timed_group(c, "single view", 3);
-    for evaluator in &mut evaluators {
+/// Each named variant of the fit options on `points`, on every evaluator.
+fn bench_variants(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    evaluators: &mut [Box<dyn Evaluator>],
+    points: &[glam::DVec3],
+    variants: &[(&str, FitOptions)],
+) {
+    for evaluator in evaluators {
         let kind = evaluator.kind();
-        for (name, viewpoint) in [("no viewpoint", None), ("viewpoint", case.viewpoint)] {
-            let options = FitOptions {
-                seed: 10_010,
-                viewpoint,
-                ..Default::default()
-            };
+        for (name, options) in variants {
             group.bench_function(BenchmarkId::new(kind, name), |b| {
-                b.iter(|| fit(evaluator.as_mut(), &case.points, &options).unwrap())
+                b.iter(|| fit(evaluator.as_mut(), points, options).unwrap())
             });
         }
     }
+}
+
+fn bench_single_view(c: &mut Criterion) {
+    let mut evaluators = evaluators();
+    let mut group = timed_group(c, "single view", 3);
+    // the suite's case 10: single view, noise 1% of the size, no outliers
+    let case = supertoroid::fit::ground_truth::make_case(10_010, true, 0.01, 0.0);
+    let options = |viewpoint| FitOptions {
+        seed: 10_010,
+        viewpoint,
+        ..Default::default()
+    };
+    bench_variants(
+        &mut group,
+        &mut evaluators,
+        &case.points,
+        &[
+            ("no viewpoint", options(None)),
+            ("viewpoint", options(case.viewpoint)),
+        ],
+    );
     // the suite's case 63: a noise-free single view whose first fit leaves the surface it
     // shows the camera uncovered, so it is fitted again with three other seeds
     let uncovered = supertoroid::fit::ground_truth::make_case(10_063, true, 0.0, 0.0);
-    for evaluator in &mut evaluators {
-        let kind = evaluator.kind();
-        for (name, retries) in [("uncovered, no retries", 0), ("uncovered, retried", 3)] {
-            let options = FitOptions {
-                seed: 10_063,
-                viewpoint: uncovered.viewpoint,
-                unseen_surface_retries: retries,
-                ..Default::default()
-            };
-            group.bench_function(BenchmarkId::new(kind, name), |b| {
-                b.iter(|| fit(evaluator.as_mut(), &uncovered.points, &options).unwrap())
-            });
-        }
-    }
+    let options = |unseen_surface_retries| FitOptions {
+        seed: 10_063,
+        viewpoint: uncovered.viewpoint,
+        unseen_surface_retries,
+        ..Default::default()
+    };
+    bench_variants(
+        &mut group,
+        &mut evaluators,
+        &uncovered.points,
+        &[
+            ("uncovered, no retries", options(0)),
+            ("uncovered, retried", options(3)),
+        ],
+    );
     group.finish();
 }
 
 /// The noise model's cost: the suite's case 5 (full cloud, noise 2% of the size, 0.45 of
 /// a3, 5% outliers), where it turns a fit with sizes 20% off into one within 3%.
 fn bench_noise_model(c: &mut Criterion) {
-    let case = supertoroid::fit::ground_truth::make_case(10_005, false, 0.02, 0.05);
     let mut evaluators = evaluators();
     let mut group = timed_group(c, "noise model", 3);
-    for evaluator in &mut evaluators {
-        let kind = evaluator.kind();
-        for (name, noise_model) in [("noisy full, plain", false), ("noisy full, modelled", true)] {
-            let options = FitOptions {
-                seed: 10_005,
-                noise_model,
-                ..Default::default()
-            };
-            group.bench_function(BenchmarkId::new(kind, name), |b| {
-                b.iter(|| fit(evaluator.as_mut(), &case.points, &options).unwrap())
-            });
-        }
-    }
+    let case = supertoroid::fit::ground_truth::make_case(10_005, false, 0.02, 0.05);
+    let options = |noise_model| FitOptions {
+        seed: 10_005,
+        noise_model,
+        ..Default::default()
+    };
+    bench_variants(
+        &mut group,
+        &mut evaluators,
+        &case.points,
+        &[
+            ("noisy full, plain", options(false)),
+            ("noisy full, modelled", options(true)),
+        ],
+    );
     group.finish();
 }
 

@@ -82,6 +82,14 @@ pub struct Refined {
     pub iterations: usize,
 }
 
+/// The smallest and largest coordinates of `points`.
+fn bounding_box(points: &[DVec3]) -> (DVec3, DVec3) {
+    points.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    )
+}
+
 /// Point on the superellipse |u|^(2/eps) + |v|^(2/eps) = 1 in the polar direction phi.
 /// (The polar angle, unlike the eta/omega of eq. (2), spaces points evenly along flat sides
 /// and round corners alike, within a factor of about sqrt 2 for eps in [0.1, 2].)
@@ -128,11 +136,60 @@ fn surface_cells(
     (centres, areas, normals)
 }
 
+/// What a sensor at `viewpoint` sees of the surface at one parameter vector: which cells
+/// (held for that vector's shape differences) and the squared range of the cells' centre
+/// (the reference of [`View::weights`]).
+struct View {
+    viewpoint: DVec3,
+    visible: Vec<bool>,
+    reference: f64,
+}
+
+impl View {
+    fn new(cells: &[DVec3], areas: &[f64], viewpoint: DVec3, sigma: f64) -> Self {
+        let centre = cells.iter().copied().sum::<DVec3>() / cells.len().max(1) as f64;
+        Self {
+            viewpoint,
+            visible: visibility(cells, areas, centre, viewpoint, sigma),
+            reference: (centre - viewpoint).length_squared(),
+        }
+    }
+
+    /// A depth sensor's points per unit area of a surface it sees: cos(incidence) /
+    /// range² (a pixel's footprint grows with range² and 1/cos), relative to the range of
+    /// the cells' centre; zero where it does not see. (A common scale of all the weights
+    /// cancels in the likelihood, so the reference need not follow the differences.)
+    fn weights(
+        &self,
+        areas: &[f64],
+        cells: &[DVec3],
+        normals: &[DVec3],
+        rotation: DQuat,
+    ) -> Vec<f64> {
+        (0..cells.len())
+            .map(|j| {
+                if !self.visible[j] {
+                    return 0.0;
+                }
+                let q = cells[j] - self.viewpoint;
+                let range2 = q.length_squared();
+                let cos = (rotation * normals[j]).dot(q).abs() / range2.sqrt();
+                areas[j] * cos * self.reference / range2
+            })
+            .collect()
+    }
+}
+
 /// Which cells a sensor at `viewpoint` sees: a depth buffer about two cells per pixel,
 /// a cell seen when it lies within two cells' depth of the nearest cell in its pixel.
-fn visibility(cells: &[DVec3], areas: &[f64], viewpoint: DVec3, sigma: f64) -> Vec<bool> {
+fn visibility(
+    cells: &[DVec3],
+    areas: &[f64],
+    centre: DVec3,
+    viewpoint: DVec3,
+    sigma: f64,
+) -> Vec<bool> {
     let m = cells.len().max(1) as f64;
-    let centre = cells.iter().copied().sum::<DVec3>() / m;
     let forward = (centre - viewpoint).normalize_or(DVec3::Z);
     let right = forward.any_orthonormal_vector();
     let up = forward.cross(right);
@@ -175,33 +232,6 @@ fn visibility(cells: &[DVec3], areas: &[f64], viewpoint: DVec3, sigma: f64) -> V
         .collect()
 }
 
-/// A depth sensor's points per unit area of a surface it sees: cos(incidence) / range²
-/// (a pixel's footprint grows with range² and 1/cos), relative to the range of the
-/// cells' centre; zero where it does not see.
-fn view_weights(
-    areas: &[f64],
-    cells: &[DVec3],
-    normals: &[DVec3],
-    rotation: DQuat,
-    viewpoint: DVec3,
-    visible: &[bool],
-) -> Vec<f64> {
-    let m = cells.len().max(1) as f64;
-    let centre = cells.iter().copied().sum::<DVec3>() / m;
-    let reference = (centre - viewpoint).length_squared();
-    (0..cells.len())
-        .map(|j| {
-            if !visible[j] {
-                return 0.0;
-            }
-            let q = cells[j] - viewpoint;
-            let range2 = q.length_squared();
-            let cos = (rotation * normals[j]).dot(q).abs() / range2.sqrt();
-            areas[j] * cos * reference / range2
-        })
-        .collect()
-}
-
 /// Perimeter of the superellipse with half-axes (a, b), from a 64-gon.
 fn perimeter(a: f64, b: f64, eps: f64) -> f64 {
     let point = |k: usize| {
@@ -241,7 +271,7 @@ struct Problem<'a> {
     outlier_density: f64,
     rotation0: DQuat,
     grid: (usize, usize),
-    /// the sensor's position: the points then cover only what it saw (see [`view_weights`])
+    /// the sensor's position: the points then cover only what it saw (see [`View`])
     viewpoint: Option<DVec3>,
 }
 
@@ -258,10 +288,7 @@ impl Buckets {
     /// Boxes at least `cut` wide, and no more than 64 along the longest side (a fine
     /// cutoff on a large shape would otherwise allocate millions of empty boxes).
     fn new(centres: &[DVec3], cut: f64) -> Self {
-        let (lo, hi) = centres.iter().fold(
-            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-        );
+        let (lo, hi) = bounding_box(centres);
         let cell = cut.max((hi - lo).max_element() / 64.0);
         let span = ((hi - lo) / cell).floor();
         let dims = [span.x as i64 + 1, span.y as i64 + 1, span.z as i64 + 1];
@@ -272,7 +299,11 @@ impl Buckets {
             start: vec![0; (dims[0] * dims[1] * dims[2]) as usize + 1],
             items: vec![0; centres.len()],
         };
-        let keys: Vec<usize> = centres.iter().map(|p| buckets.key(*p).unwrap()).collect();
+        // (every centre lies in the box by construction)
+        let keys: Vec<usize> = centres
+            .iter()
+            .map(|p| buckets.index(buckets.coords(*p)).unwrap_or(0))
+            .collect();
         for &k in &keys {
             buckets.start[k + 1] += 1;
         }
@@ -290,11 +321,6 @@ impl Buckets {
     fn coords(&self, p: DVec3) -> [i64; 3] {
         let q = ((p - self.origin) / self.cell).floor();
         [q.x as i64, q.y as i64, q.z as i64]
-    }
-
-    fn key(&self, p: DVec3) -> Option<usize> {
-        let c = self.coords(p);
-        self.index(c)
     }
 
     fn index(&self, c: [i64; 3]) -> Option<usize> {
@@ -354,16 +380,12 @@ impl Problem<'_> {
         let cells = to_world(&canonical);
         // seen from a viewpoint, a cell's share is its area times its view weight (the
         // visibility found once here, held for the differences below)
-        let visible = self
+        let view = self
             .viewpoint
-            .map(|v| visibility(&cells, &areas, v, x[12].exp()));
-        let weigh = |areas: Vec<f64>, cells: &[DVec3], normals: &[DVec3]| -> Vec<f64> {
-            match (self.viewpoint, &visible) {
-                (Some(v), Some(visible)) => {
-                    view_weights(&areas, cells, normals, rotation, v, visible)
-                }
-                _ => areas,
-            }
+            .map(|v| View::new(&cells, &areas, v, x[12].exp()));
+        let weigh = |areas: Vec<f64>, cells: &[DVec3], normals: &[DVec3]| match &view {
+            Some(view) => view.weights(&areas, cells, normals, rotation),
+            None => areas,
         };
         let areas = weigh(areas, &cells, &normals);
         let area: f64 = areas.iter().sum();
@@ -379,10 +401,9 @@ impl Problem<'_> {
                 let step = 1e-6 * shape[k].abs().max(1e-2);
                 moved[k] += step;
                 let (canonical2, areas2, normals2) = surface_cells(&moved, rings, sectors);
-                let areas2 = if self.viewpoint.is_some() {
-                    weigh(areas2, &to_world(&canonical2), &normals2)
-                } else {
-                    areas2
+                let areas2 = match view {
+                    Some(_) => weigh(areas2, &to_world(&canonical2), &normals2),
+                    None => areas2,
                 };
                 d_log_area[k] = (areas2.iter().sum::<f64>() / area - 1.0) / step;
                 for j in 0..m {
@@ -543,10 +564,7 @@ pub fn refine(
     if s.a4 <= 1.0 || !(sigma > 0.0) || points.len() < 20 {
         return None;
     }
-    let (lo, hi) = points.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
+    let (lo, hi) = bounding_box(points);
     let volume = (hi - lo).max(DVec3::splat(sigma)).element_product();
     let mut problem = Problem {
         points,
@@ -574,8 +592,7 @@ pub fn refine(
     ]);
     let axis = start.pose.axis();
     // what is held fixed leaves the step: known shape parameters, and with a known axis
-    // every turn but the one about it (in the frame of that axis: two rotation components
-    // replaced by zero through a projection of the system)
+    // every turn but the one about it
     let mut free = [true; N];
     for k in 0..6 {
         free[k] = !limits.fixed_shape[k];
@@ -587,30 +604,33 @@ pub fn refine(
             && x[12] > (1e-3 * sigma).ln()
             && x[12] < (1e2 * sigma).ln()
     };
-    let solve_step = |g: &Vector, h: &Matrix, lambda: f64| -> Option<Vector> {
-        let mut h = *h;
-        let mut g = *g;
-        if limits.fixed_axis {
-            // only turns about the axis: rotation part r = axis * theta
-            let mut p = Matrix::identity();
-            for (r, c) in [(9, 9), (10, 10), (11, 11)] {
-                p[(r, c)] = 0.0;
-            }
-            let a = [axis.x, axis.y, axis.z];
-            for r in 0..3 {
-                p[(9 + r, 9)] = a[r];
-            }
-            h = p.transpose() * h * p;
-            g = p.transpose() * g;
-            let step = lm_solve(&g, &h, lambda, &{
-                let mut f = free;
-                f[10] = false;
-                f[11] = false;
-                f
-            })?;
-            return Some(p * step);
+    // with a known axis the turn is theta about it: the step is solved in parameters
+    // whose rotation part is theta alone (column 9 of the map is the axis, 10 and 11 empty)
+    let reduction = limits.fixed_axis.then(|| {
+        let mut map = Matrix::identity();
+        for k in 9..12 {
+            map[(k, k)] = 0.0;
         }
-        lm_solve(&g, &h, lambda, &free)
+        for (k, a) in axis.to_array().into_iter().enumerate() {
+            map[(9 + k, 9)] = a;
+        }
+        free[10] = false;
+        free[11] = false;
+        map
+    });
+    let solve_step = |g: &Vector, h: &Matrix, lambda: f64| -> Option<Vector> {
+        match &reduction {
+            Some(map) => {
+                let step = lm_solve(
+                    &(map.transpose() * g),
+                    &(map.transpose() * h * map),
+                    lambda,
+                    &free,
+                )?;
+                Some(map * step)
+            }
+            None => lm_solve(g, h, lambda, &free),
+        }
     };
     let (mut f, mut g, mut h) = problem.evaluate(&x, true);
     let mut lambda = 1e-3;

@@ -170,8 +170,9 @@ pub struct FitOptions {
     /// module); 0 turns the retries off, the paper's method never retries
     pub unseen_surface_retries: u64,
     /// a fit whose noise is at least [`LIKELIHOOD_NOISE_RATIO`] of its thinnest half-axis
-    /// is polished to the maximum-likelihood surface of a model of the noise (and, with a
-    /// viewpoint, of what the sensor saw; see [`likelihood`]); the paper's method never is
+    /// ([`LIKELIHOOD_VIEW_NOISE_RATIO`] with a viewpoint) is polished to the
+    /// maximum-likelihood surface of a model of the noise (and, with a viewpoint, of what
+    /// the sensor saw; see [`likelihood`]); the paper's method never is
     pub noise_model: bool,
 }
 
@@ -944,9 +945,11 @@ fn refine_robustly(
 }
 
 /// The noise model's polish ([`likelihood`]) of a chosen solution, where the cloud's
-/// options ask for it, the solution has a hole and its noise is at least
-/// [`LIKELIHOOD_NOISE_RATIO`] of its thinnest half-axis. Runs on the stage-2 sample; its
-/// iterations count as stage 2's. With the model's sigma (normalised units) when it ran.
+/// options ask for it, the solution has a hole, its noise is at least
+/// [`LIKELIHOOD_NOISE_RATIO`] ([`LIKELIHOOD_VIEW_NOISE_RATIO`]) of its thinnest half-axis,
+/// and without a viewpoint the points cover [`LIKELIHOOD_MIN_COVERAGE`] of its surface.
+/// Runs on the stage-2 sample; its iterations count as stage 2's. With the model's sigma
+/// (normalised units) when it ran.
 fn refine_noisy(p: &Prepared, solution: Solution) -> (Solution, Option<f64>) {
     let c = solution.candidate;
     if !p.noise_model || c.shape.a4 <= 1.0 {

@@ -97,9 +97,9 @@ pub const NOISE_WARNING_RATIO: f64 = 0.15;
 /// The same for a fit without a viewpoint that the noise model ([`super::likelihood`])
 /// polished, whose sigma is the model's own (single views keep the ratio above: there
 /// the model's fits at 0.1-0.2 of the thinnest half-axis were within tolerance in 36 of
-/// 69 cases, above 0.2 in 11 of 58). Measured on the suite's full clouds (270 cases, seeds 10000, 20000,
-/// 30000): 265 within tolerance, 262 of the 266 unwarned; 4 of the 5 misses had noise at
-/// 0.1-0.7 of the thinnest half-axis.
+/// 69 cases, above 0.2 in 11 of 58). Measured on the suite's full clouds (270 cases,
+/// seeds 10000, 20000, 30000): 265 within tolerance, 262 of the 266 unwarned; 4 of the 5
+/// misses had noise at 0.1-0.7 of the thinnest half-axis.
 pub const NOISE_MODEL_WARNING_RATIO: f64 = 0.5;
 
 /// The warning of [`NOISE_WARNING_RATIO`] ([`NOISE_MODEL_WARNING_RATIO`] for a full
