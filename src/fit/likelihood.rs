@@ -80,6 +80,9 @@ pub struct Refined {
     pub candidate: Candidate,
     pub sigma: f64,
     pub iterations: usize,
+    /// the negative mean log-likelihood of the points at the refined parameters (lower
+    /// is better; comparable between refinements of the same points)
+    pub objective: f64,
 }
 
 /// The smallest and largest coordinates of `points`.
@@ -678,6 +681,7 @@ pub fn refine(
         candidate: Candidate { shape, pose },
         sigma: x[12].exp(),
         iterations,
+        objective: f,
     })
 }
 
