@@ -1050,51 +1050,9 @@ fn rescue_unseen_surface(
         return None;
     }
     let fitted = p.norm.candidate(&first.fitted.0, &first.fitted.1);
-    let axis = fitted.pose.axis();
-    let hint = fitted.pose.rotation * DVec3::X;
     let mut starts = vec![fitted];
-    for a4 in RESCUE_A4 {
-        let mut start = start_for_axis(&p.stage2_pts, axis, hint, a4);
-        // (the known dimensions hold in the start too)
-        let mut shape = start.shape.to_array();
-        for (v, k) in shape.iter_mut().zip(&p.known) {
-            if let Some(k) = k {
-                *v = *k;
-            }
-        }
-        start.shape = Shape::from_array(shape);
-        starts.push(start);
-    }
-    let best = starts
-        .into_iter()
-        .filter(|s| s.shape.a4 > 1.0)
-        .filter_map(|mut start| {
-            let noise = report::noise_sigma(&start.shape, &start.pose, &p.stage2_pts, 250);
-            // a collapsed start's section must hold the noise's spread
-            if p.known[2].is_none() {
-                start.shape.a3 = start.shape.a3.max(2.0 * noise);
-            }
-            let limits = likelihood::Limits {
-                bounds: p.supported_bounds(&start),
-                fixed_shape: p.known.map(|k| k.is_some()),
-                fixed_axis: p.known_axis,
-            };
-            likelihood::refine(
-                &p.stage2_pts,
-                &start,
-                noise,
-                LIKELIHOOD_OUTLIER_WEIGHT,
-                Some(viewpoint),
-                &limits,
-            )
-        })
-        .filter(|r| {
-            coverage::visible_coverage(&r.candidate, &p.stage2_pts, viewpoint)
-                >= coverage::MIN_VISIBLE_COVERAGE
-                && free_space::violated_fraction(&r.candidate, &p.stage2_free)
-                    <= free_space::MAX_VIOLATED_FRACTION
-        })
-        .min_by(|a, b| a.objective.total_cmp(&b.objective))?;
+    starts.extend(p.collapsed_starts(&fitted));
+    let best = p.most_likely_covered(starts, viewpoint)?;
     Some(report(
         &p,
         &best.candidate,
@@ -1157,6 +1115,67 @@ impl Prepared<'_> {
             }
         }
         bounds
+    }
+
+    /// Bodies collapsed onto the stage-2 sample along the hole axis of `fitted`
+    /// ([`start_for_axis`] with each of the [`RESCUE_A4`]), the known dimensions held.
+    fn collapsed_starts(&self, fitted: &Candidate) -> Vec<Candidate> {
+        let axis = fitted.pose.axis();
+        let hint = fitted.pose.rotation * DVec3::X;
+        RESCUE_A4
+            .iter()
+            .map(|&a4| {
+                let mut start = start_for_axis(&self.stage2_pts, axis, hint, a4);
+                let mut shape = start.shape.to_array();
+                for (v, k) in shape.iter_mut().zip(&self.known) {
+                    if let Some(k) = k {
+                        *v = *k;
+                    }
+                }
+                start.shape = Shape::from_array(shape);
+                start
+            })
+            .collect()
+    }
+
+    /// Each start (with a hole) refined by the noise model seen from `viewpoint`; of the
+    /// refinements whose visible surface the points cover and whose free space holds, the
+    /// most likely.
+    fn most_likely_covered(
+        &self,
+        starts: Vec<Candidate>,
+        viewpoint: DVec3,
+    ) -> Option<likelihood::Refined> {
+        starts
+            .into_iter()
+            .filter(|s| s.shape.a4 > 1.0)
+            .filter_map(|mut start| {
+                let noise = report::noise_sigma(&start.shape, &start.pose, &self.stage2_pts, 250);
+                // a collapsed start's section must hold the noise's spread
+                if self.known[2].is_none() {
+                    start.shape.a3 = start.shape.a3.max(2.0 * noise);
+                }
+                let limits = likelihood::Limits {
+                    bounds: self.supported_bounds(&start),
+                    fixed_shape: self.known.map(|k| k.is_some()),
+                    fixed_axis: self.known_axis,
+                };
+                likelihood::refine(
+                    &self.stage2_pts,
+                    &start,
+                    noise,
+                    LIKELIHOOD_OUTLIER_WEIGHT,
+                    Some(viewpoint),
+                    &limits,
+                )
+            })
+            .filter(|r| {
+                coverage::visible_coverage(&r.candidate, &self.stage2_pts, viewpoint)
+                    >= coverage::MIN_VISIBLE_COVERAGE
+                    && free_space::violated_fraction(&r.candidate, &self.stage2_free)
+                        <= free_space::MAX_VIOLATED_FRACTION
+            })
+            .min_by(|a, b| a.objective.total_cmp(&b.objective))
     }
 
     fn overreaches(&self, candidate: &Candidate, sample: &[DVec3]) -> bool {
