@@ -446,28 +446,21 @@ impl Problem<'_> {
         // and per unit of ln sigma sum_j rho_ij |x - s_j|² / sigma² - 3 u_i, with
         // rho_ij = (1 - w_out) a_j K_ij / (A Z p(x_i)), c_ij the same with the shifted
         // kernel, u_i = sum_j c_ij (the point's inlier share)
+        // (one pass over the nearby cells: every term of the gradient carries the point's
+        // factor f = inlier_scale / p(x_i), applied once the kernel sum, and so p, is known)
         let point_term = |x: &DVec3| -> (f64, Vector) {
             let mut kernel_sum = 0.0;
-            buckets.near(*x, |j| {
-                let d2 = (*x - surface.cells[j]).length_squared();
-                if d2 < cut * cut {
-                    kernel_sum += surface.areas[j] * ((-d2 * half_inv_var).exp() - floor);
-                }
-            });
-            let density = inlier_scale * kernel_sum + self.outlier_density;
             let mut g = Vector::zeros();
-            if with_gradient {
-                let f = inlier_scale / density;
-                let mut inlier_share = 0.0;
-                buckets.near(*x, |j| {
-                    let d = *x - surface.cells[j];
-                    let d2 = d.length_squared();
-                    if d2 < cut * cut {
-                        // (the shift moves the kernel's value, not its slope)
-                        let kernel = (-d2 * half_inv_var).exp();
-                        let rho = f * surface.areas[j] * kernel / var;
-                        let c = f * surface.areas[j] * (kernel - floor);
-                        inlier_share += c;
+            buckets.near(*x, |j| {
+                let d = *x - surface.cells[j];
+                let d2 = d.length_squared();
+                if d2 < cut * cut {
+                    let kernel = (-d2 * half_inv_var).exp();
+                    // (the shift moves the kernel's value, not its slope)
+                    let c = surface.areas[j] * (kernel - floor);
+                    kernel_sum += c;
+                    if with_gradient {
+                        let rho = surface.areas[j] * kernel / var;
                         for k in 0..6 {
                             g[k] +=
                                 c * surface.d_log_areas[j][k] + rho * d.dot(surface.d_cells[j][k]);
@@ -482,7 +475,13 @@ impl Problem<'_> {
                         g[11] += turn.z;
                         g[12] += rho * d2;
                     }
-                });
+                }
+            });
+            let density = inlier_scale * kernel_sum + self.outlier_density;
+            if with_gradient {
+                let f = inlier_scale / density;
+                g *= f;
+                let inlier_share = f * kernel_sum;
                 for k in 0..6 {
                     g[k] -= inlier_share * surface.d_log_area[k];
                 }
