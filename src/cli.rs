@@ -213,8 +213,9 @@ pub struct FitArgs {
     /// surface it shows the sensor without points (0 turns the retries off; at most 16)
     #[arg(long, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=crate::fit::MAX_UNSEEN_SURFACE_RETRIES))]
     pub retries: u64,
-    /// skip the noise model's polish of noisy fits (faster by about 20-100 ms on such
-    /// clouds; their sizes and eps then carry the noise's bias)
+    /// skip the noise model's polish of noisy fits and its rescue of uncovered single
+    /// views (faster by about 20-100 ms on such clouds; their sizes and eps then carry
+    /// the noise's bias)
     #[arg(long)]
     pub no_noise_model: bool,
     /// also write the fitted surface as a PLY mesh with normals

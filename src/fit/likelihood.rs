@@ -53,7 +53,7 @@ pub const MAX_CELLS: usize = 12_000;
 /// A step that raises the mean log-likelihood by less than this ends the refinement (a
 /// thousand points: 0.02 in all, far below what tells two fits apart statistically).
 pub const STOP_DECREASE: f64 = 2e-5;
-/// Levenberg-Marquardt iterations at most.
+/// Levenberg-Marquardt iterations at most, by default.
 pub const MAX_ITERATIONS: usize = 30;
 
 /// The parameters of the refinement: shape a1 a2 a3 a4 eps1 eps2, translation, a rotation
@@ -561,6 +561,7 @@ pub fn refine(
     outlier_weight: f64,
     viewpoint: Option<DVec3>,
     limits: &Limits,
+    max_iterations: usize,
 ) -> Option<Refined> {
     let s = start.shape;
     if s.a4 <= 1.0 || !(sigma > 0.0) || points.len() < 20 {
@@ -637,7 +638,7 @@ pub fn refine(
     let (mut f, mut g, mut h) = problem.evaluate(&x, true);
     let mut lambda = 1e-3;
     let mut iterations = 0;
-    while iterations < MAX_ITERATIONS {
+    while iterations < max_iterations {
         iterations += 1;
         let Some(step) = solve_step(&g, &h, lambda) else {
             break;
@@ -756,7 +757,7 @@ mod tests {
             fixed_shape: [true, false, false, false, false, false],
             fixed_axis: true,
         };
-        let r = refine(&points, &start, 0.02, 0.05, None, &limits).unwrap();
+        let r = refine(&points, &start, 0.02, 0.05, None, &limits, MAX_ITERATIONS).unwrap();
         let s = r.candidate.shape;
         assert!((s.a3 - 0.08).abs() < 0.004, "a3 {}", s.a3);
         assert!((s.eps1 - 0.6).abs() < 0.08, "eps1 {}", s.eps1);

@@ -63,8 +63,9 @@ pub struct FitRequestOptions {
     /// surface it shows the sensor without points (default 3, 0 turns them off, at most
     /// 16); each retry costs about one fit, and only such fits are retried
     pub retries: Option<u64>,
-    /// polish a noisy fit under a model of the noise (default true; false saves 20-100 ms
-    /// on such clouds, and leaves the noise's bias in sizes and eps)
+    /// polish a noisy fit under a model of the noise, and rescue an uncovered single view
+    /// with it (default true; false saves 20-100 ms on such clouds, and leaves the noise's
+    /// bias in sizes and eps)
     pub noise_model: Option<bool>,
     /// pipeline: default, or paper (the paper's procedure, a baseline)
     pub method: Option<crate::fit::Method>,
