@@ -523,6 +523,16 @@ fn suite_cases_from(first_seed: u64, keep: impl Fn(bool, f64, f64) -> bool) -> V
         .collect()
 }
 
+/// The default options for a suite case seen from its camera, the noise model on or off.
+fn view_options(seed: u64, case: &Case, noise_model: bool) -> FitOptions {
+    FitOptions {
+        seed,
+        viewpoint: case.viewpoint,
+        noise_model,
+        ..Default::default()
+    }
+}
+
 /// Whether the fit with `options` recovers the case (the suite's rule), and the fit.
 fn recovers(evaluator: &mut CpuEvaluator, case: &Case, options: &FitOptions) -> (bool, FitReport) {
     let report = fit(evaluator, &case.points, options).unwrap();
@@ -993,12 +1003,7 @@ fn the_noise_model_helps_noisy_single_views() {
     let cases = suite_cases(|partial, noise, _| partial && noise > 0.0);
     let (mut with, mut without) = (0, 0);
     for (seed, case) in &cases {
-        let options = |noise_model| FitOptions {
-            seed: *seed,
-            viewpoint: case.viewpoint,
-            noise_model,
-            ..Default::default()
-        };
+        let options = |noise_model| view_options(*seed, case, noise_model);
         with += recovers(&mut evaluator, case, &options(true)).0 as usize;
         without += recovers(&mut evaluator, case, &options(false)).0 as usize;
     }
@@ -1031,12 +1036,7 @@ fn uncovered_single_views_are_rescued() {
     let (mut plain_uncovered, mut plain_recovered) = (0, 0);
     let (mut still_uncovered, mut rescued) = (0, 0);
     for (seed, case) in &cases {
-        let options = |noise_model| FitOptions {
-            seed: *seed,
-            viewpoint: case.viewpoint,
-            noise_model,
-            ..Default::default()
-        };
+        let options = |noise_model| view_options(*seed, case, noise_model);
         let (plain_ok, plain) = recovers(&mut evaluator, case, &options(false));
         if !uncovered(&plain) {
             continue;

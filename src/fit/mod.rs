@@ -1052,11 +1052,13 @@ fn rescue_unseen_surface(
     options: &FitOptions,
     first: &FitReport,
 ) -> Option<FitReport> {
-    let p = prepare(points, options).ok()?;
-    let viewpoint = p.viewpoint?;
-    if p.method != Method::Default || !p.noise_model {
+    if options.method != Method::Default || !options.noise_model {
         return None;
     }
+    // (the first fit's preparation, sample and free-space points again: a few
+    // milliseconds against the rescue's hundreds, and the first fit keeps none of it)
+    let p = prepare(points, options).ok()?;
+    let viewpoint = p.viewpoint?;
     let fitted = p.norm.candidate(&first.fitted.0, &first.fitted.1);
     let mut starts = vec![fitted];
     starts.extend(p.collapsed_starts(&fitted));
