@@ -81,6 +81,11 @@ pub struct FitReport {
     /// [`super::free_space::violated_fraction`]); None without a viewpoint
     #[serde(skip)]
     pub free_space_violation: Option<f64>,
+    /// with a viewpoint: the least-squares fit, before the noise model moved it, left its
+    /// visible surface uncovered (the model can move a wrong basin's fit onto the points'
+    /// surface; the retries must still see it)
+    #[serde(skip)]
+    pub uncovered_before_model: bool,
 }
 
 /// Noise ([`Quality::noise_sigma`]) above this fraction of the fitted shape's smallest
