@@ -1024,7 +1024,8 @@ fn the_noise_model_helps_noisy_single_views() {
 /// nearly all wrong. With the noise model they are refined from themselves and from
 /// bodies collapsed onto the points: at most one may stay uncovered, and at least 4 more
 /// must be recovered than plainly (measured when written: 19 uncovered plain fits, 0 of
-/// them recovered; with the noise model 7 recovered, none uncovered).
+/// them recovered; with the noise model 7 recovered, none uncovered; 8 since the retries
+/// follow the least-squares fit's coverage).
 #[test]
 fn uncovered_single_views_are_rescued() {
     let mut evaluator = CpuEvaluator::new();
