@@ -205,6 +205,10 @@ pub const MAX_SIGMA_GROWTH: f64 = 2.0;
 /// successes, 0.05 441, 0.1 438.
 pub const LIKELIHOOD_OUTLIER_WEIGHT: f64 = 0.05;
 
+/// Points of the stage-2 sample whose distances tell whether a fit is noisy enough for
+/// the noise model (a quick look; the report's estimate uses more).
+const NOISE_CHECK_SAMPLE: usize = 250;
+
 impl Default for FitOptions {
     fn default() -> Self {
         Self {
@@ -297,6 +301,17 @@ pub fn principal_axes(points: &[DVec3]) -> (DMat3, DVec3) {
         eig.eigenvalues[order[2]].max(0.0).sqrt(),
     );
     (axes, sigma)
+}
+
+/// `shape` with the known parameters (normalised sizes) put in.
+fn holding_known(shape: Shape, known: &[Option<f64>; 6]) -> Shape {
+    let mut v = shape.to_array();
+    for (v, k) in v.iter_mut().zip(known) {
+        if let Some(k) = k {
+            *v = *k;
+        }
+    }
+    Shape::from_array(v)
 }
 
 /// Starting shape for a hole axis: sizes from the cloud's extent across and along it.
@@ -741,13 +756,11 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
                 }
             )));
         }
-        for start in &mut starts {
-            let mut shape = start.shape.to_array();
-            shape[i] = v;
-            start.shape = Shape::from_array(shape);
-        }
         opts1.fixed[i] = true;
         known[i] = Some(v);
+    }
+    for start in &mut starts {
+        start.shape = holding_known(start.shape, &known);
     }
     // with a1 and a2 both held, the in-plane turn cannot trade them any more: each start
     // also goes a quarter turn about its axis
@@ -994,7 +1007,7 @@ fn refine_noisy(p: &Prepared, solution: Solution) -> (Solution, Option<f64>) {
     }
     // (a few hundred points tell whether the noise is large; the paper's clouds, never
     // refined, pay about 0.2 ms for it)
-    let sigma = report::noise_sigma(&c.shape, &c.pose, &p.stage2_pts, 250);
+    let sigma = report::noise_sigma(&c.shape, &c.pose, &p.stage2_pts, NOISE_CHECK_SAMPLE);
     let threshold = match p.viewpoint {
         Some(_) => LIKELIHOOD_VIEW_NOISE_RATIO,
         None => LIKELIHOOD_NOISE_RATIO,
@@ -1017,11 +1030,7 @@ fn refine_noisy(p: &Prepared, solution: Solution) -> (Solution, Option<f64>) {
     {
         return (solution, None);
     }
-    let limits = likelihood::Limits {
-        bounds: p.supported_bounds(&c),
-        fixed_shape: p.known.map(|k| k.is_some()),
-        fixed_axis: p.known_axis,
-    };
+    let limits = p.likelihood_limits(&c);
     let refined = likelihood::refine(
         &p.stage2_pts,
         &c,
@@ -1152,6 +1161,16 @@ impl Prepared<'_> {
         bounds
     }
 
+    /// What the noise model may move from `start`: the supported box, the known shape
+    /// parameters and the known axis held.
+    fn likelihood_limits(&self, start: &Candidate) -> likelihood::Limits {
+        likelihood::Limits {
+            bounds: self.supported_bounds(start),
+            fixed_shape: self.known.map(|k| k.is_some()),
+            fixed_axis: self.known_axis,
+        }
+    }
+
     /// Bodies collapsed onto the stage-2 sample along the hole axis of `fitted`
     /// ([`start_for_axis`] with each of the [`RESCUE_A4`]), the known dimensions held.
     fn collapsed_starts(&self, fitted: &Candidate) -> Vec<Candidate> {
@@ -1161,13 +1180,7 @@ impl Prepared<'_> {
             .iter()
             .map(|&a4| {
                 let mut start = start_for_axis(&self.stage2_pts, axis, hint, a4);
-                let mut shape = start.shape.to_array();
-                for (v, k) in shape.iter_mut().zip(&self.known) {
-                    if let Some(k) = k {
-                        *v = *k;
-                    }
-                }
-                start.shape = Shape::from_array(shape);
+                start.shape = holding_known(start.shape, &self.known);
                 start
             })
             .collect()
@@ -1183,18 +1196,13 @@ impl Prepared<'_> {
         viewpoint: DVec3,
     ) -> Option<likelihood::Refined> {
         let refine = |start: &Candidate, sigma: f64, iterations: usize| {
-            let limits = likelihood::Limits {
-                bounds: self.supported_bounds(start),
-                fixed_shape: self.known.map(|k| k.is_some()),
-                fixed_axis: self.known_axis,
-            };
             likelihood::refine(
                 &self.stage2_pts,
                 start,
                 sigma,
                 LIKELIHOOD_OUTLIER_WEIGHT,
                 Some(viewpoint),
-                &limits,
+                &self.likelihood_limits(start),
                 iterations,
             )
         };
@@ -1202,7 +1210,12 @@ impl Prepared<'_> {
             .into_iter()
             .filter(|s| s.shape.a4 > 1.0)
             .filter_map(|mut start| {
-                let noise = report::noise_sigma(&start.shape, &start.pose, &self.stage2_pts, 250);
+                let noise = report::noise_sigma(
+                    &start.shape,
+                    &start.pose,
+                    &self.stage2_pts,
+                    NOISE_CHECK_SAMPLE,
+                );
                 // a collapsed start's section must hold the noise's spread
                 if self.known[2].is_none() {
                     start.shape.a3 = start.shape.a3.max(2.0 * noise);
