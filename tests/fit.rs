@@ -997,7 +997,8 @@ fn the_noise_model_recovers_noisy_full_clouds() {
 /// With the camera's position the noise model also weighs what the sensor saw
 /// (cos(incidence) / range² on the visible surface): on the suite's 60 noisy single views
 /// (noise 1% and 2%) it must recover more shapes than the fit without it (measured when
-/// written: 36 of 60 with it, 19 without; it needs a margin of 10).
+/// written: 36 of 60 with it, 19 without; since the tenth session's corrected view model,
+/// back faces culled and grazing faces kept, 50 with it; it needs a margin of 25).
 #[test]
 fn the_noise_model_helps_noisy_single_views() {
     let mut evaluator = CpuEvaluator::new();
@@ -1013,7 +1014,7 @@ fn the_noise_model_helps_noisy_single_views() {
         cases.len()
     );
     assert!(
-        with >= without + 10,
+        with >= without + 25,
         "{with} with the noise model, {without} without"
     );
 }
@@ -1022,10 +1023,11 @@ fn the_noise_model_helps_noisy_single_views() {
 /// 60 noisy single views from seed 20000, the fits that the plain pipeline (retries
 /// included, no noise model) leaves with most of their visible surface uncovered are
 /// nearly all wrong. With the noise model they are refined from themselves and from
-/// bodies collapsed onto the points: at most one may stay uncovered, and at least 4 more
+/// bodies collapsed onto the points: at most one may stay uncovered, and at least 12 more
 /// must be recovered than plainly (measured when written: 19 uncovered plain fits, 0 of
 /// them recovered; with the noise model 7 recovered, none uncovered; 8 since the retries
-/// follow the least-squares fit's coverage).
+/// follow the least-squares fit's coverage; 16 since the view model's back faces and
+/// grazing faces were corrected).
 #[test]
 fn uncovered_single_views_are_rescued() {
     let mut evaluator = CpuEvaluator::new();
@@ -1059,21 +1061,23 @@ fn uncovered_single_views_are_rescued() {
     );
     assert!(still_uncovered <= 1, "{still_uncovered} still uncovered");
     assert!(
-        rescued >= plain_recovered + 4,
+        rescued >= plain_recovered + 12,
         "{rescued} recovered with the noise model, {plain_recovered} plainly"
     );
 }
 
 /// The retries follow the least-squares fit's coverage, not only the final one's: the
 /// noise model can move a fit from a wrong basin onto the points' surface, covered but
-/// still wrong. The suite's case 10012 (noise-free single view, 5% outliers) with a1..a4
-/// known: without retries the model's fit is covered with its axis 5.3 degrees off; with
-/// them a retry finds the true shape.
+/// still wrong. The suite's case 30160 (single view, 1% noise, 10% outliers) with a1..a4
+/// known: without retries the model's fit is covered, unwarned and out of tolerance; with
+/// them a retry finds the true shape. (Case 10012 showed it until the tenth session's
+/// corrected view model fitted it right at once; 30160 is the one case of the 270
+/// single views that still shows it.)
 #[test]
 fn a_fit_the_noise_model_covered_is_still_retried() {
     let mut evaluator = CpuEvaluator::new();
-    let seed = 10_012;
-    let case = make_case(seed, true, 0.0, 0.05);
+    let seed = 30_160;
+    let case = make_case(seed, true, 0.01, 0.1);
     let s = case.shape;
     let options = |retries| FitOptions {
         seed,

@@ -6,7 +6,7 @@
 use super::{Machine, Report, Stats};
 use crate::eval::{Backend, make_evaluator};
 use crate::fit::ground_truth::{AXIS_BOUND_DEGREES, CENTRE_BOUND, compare, make_case};
-use crate::fit::{FitOptions, fit};
+use crate::fit::{FitOptions, attainable, fit};
 use serde::Serialize;
 
 /// The suite's first case seed (`bench synthetic --seed`): case i uses seed + i.
@@ -41,6 +41,9 @@ pub struct Case {
     /// whether it carried the unseen-surface warning (`fit::coverage`, single views
     /// with the viewpoint only)
     pub coverage_warning: bool,
+    /// the share of an efficient estimator's fits of this cloud within the tolerances
+    /// (`fit::attainable`: the Cramér-Rao bound of its inliers); NaN where it has none
+    pub attainable: f64,
 }
 
 /// Successes among the cases of one cloud kind in one band of a quantity.
@@ -63,6 +66,8 @@ pub struct Category {
     pub cases: usize,
     pub successes: usize,
     pub rate: f64,
+    /// the mean of the cases' `attainable`
+    pub attainable_rate: f64,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -87,6 +92,10 @@ pub struct SyntheticReport {
     pub full_rate: f64,
     pub partial_rate: f64,
     pub partial_with_outliers_rate: f64,
+    /// what an efficient estimator would reach (means of the cases' `attainable`): the
+    /// ceiling that the data themselves set, overall and on partial clouds with outliers
+    pub attainable_overall_rate: f64,
+    pub attainable_partial_with_outliers_rate: f64,
     /// the share of full / partial fits whose pose alone is right (centre and hole axis
     /// within the success bounds), whatever their shape errors: what a grasp needs first
     pub full_pose_rate: f64,
@@ -117,6 +126,15 @@ fn error_stats(cases: &[&Case]) -> ErrorStats {
 fn rate<'a>(cases: impl Iterator<Item = &'a Case>) -> f64 {
     let (n, ok) = cases.fold((0, 0), |(n, ok), c| (n + 1, ok + c.success as usize));
     if n == 0 { 0.0 } else { ok as f64 / n as f64 }
+}
+
+/// The mean `attainable` of the cases that have one.
+fn mean_attainable<'a>(cases: impl Iterator<Item = &'a Case>) -> f64 {
+    let values: Vec<f64> = cases
+        .map(|c| c.attainable)
+        .filter(|a| a.is_finite())
+        .collect();
+    values.iter().sum::<f64>() / values.len().max(1) as f64
 }
 
 fn pose_rate(cases: &[&Case]) -> f64 {
@@ -184,6 +202,7 @@ pub fn run(
             noise_ratio: noise * case.shape.size() / case.shape.thinnest_half_axis(),
             noise_warning: report.warnings.iter().any(|w| w.starts_with("noisy")),
             coverage_warning: report.warnings.iter().any(|w| w.starts_with("unseen")),
+            attainable: attainable::suite_case(&case, case_seed).map_or(f64::NAN, |a| a.success),
         });
         bar.inc(1);
     }
@@ -203,6 +222,7 @@ pub fn run(
             cases: members.len(),
             successes,
             rate: successes as f64 / members.len().max(1) as f64,
+            attainable_rate: mean_attainable(members.iter().copied()),
         });
     }
     let full: Vec<&Case> = out.iter().filter(|c| !c.partial).collect();
@@ -216,6 +236,10 @@ pub fn run(
         full_rate: rate(full.iter().copied()),
         partial_rate: rate(partial.iter().copied()),
         partial_with_outliers_rate: rate(partial.iter().copied().filter(|c| c.outliers > 0.0)),
+        attainable_overall_rate: mean_attainable(out.iter()),
+        attainable_partial_with_outliers_rate: mean_attainable(
+            partial.iter().copied().filter(|c| c.outliers > 0.0),
+        ),
         full_pose_rate: pose_rate(&full),
         partial_pose_rate: pose_rate(&partial),
         errors_full: error_stats(&full),
@@ -275,11 +299,11 @@ impl Report for SyntheticReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,noise_warning,coverage_warning\n",
+            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,noise_warning,coverage_warning,attainable\n",
         );
         for c in &self.cases {
             s += &format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 c.seed,
                 c.partial,
                 c.noise,
@@ -293,7 +317,8 @@ impl Report for SyntheticReport {
                 c.t_total_ms,
                 c.noise_ratio,
                 c.noise_warning,
-                c.coverage_warning
+                c.coverage_warning,
+                c.attainable
             );
         }
         s
@@ -355,17 +380,23 @@ impl Report for SyntheticReport {
             100.0 * self.full_pose_rate,
             100.0 * self.partial_pose_rate
         );
-        md += "| cloud | noise | outliers | cases | success |\n|---|---:|---:|---:|---:|\n";
+        md += &format!(
+            "What the clouds allow (`fit::attainable`): an efficient estimator, one that reaches the Cramér-Rao bound of each cloud's inliers, would succeed on {:.1}% overall and {:.1}% of the partial clouds with outliers (a first-order figure: see the module's caveats).\n\n",
+            100.0 * self.attainable_overall_rate,
+            100.0 * self.attainable_partial_with_outliers_rate
+        );
+        md += "| cloud | noise | outliers | cases | success | efficient bound |\n|---|---:|---:|---:|---:|---:|\n";
         for c in &self.categories {
             md += &format!(
-                "| {} | {:.0}% | {:.0}% | {} | {}/{} ({:.0}%) |\n",
+                "| {} | {:.0}% | {:.0}% | {} | {}/{} ({:.0}%) | {:.0}% |\n",
                 if c.partial { "partial" } else { "full" },
                 100.0 * c.noise,
                 100.0 * c.outliers,
                 c.cases,
                 c.successes,
                 c.cases,
-                100.0 * c.rate
+                100.0 * c.rate,
+                100.0 * c.attainable_rate
             );
         }
         md += "\nBy the noise against the shape: the true noise sigma over the true shape's smallest half-axis (min of a1, a2, a3), and by the fit's warnings: `noisy` (its own estimate of the same ratio at or above `fit::NOISE_WARNING_RATIO`) and `unseen surface` (with the viewpoint, less than `fit::coverage::MIN_VISIBLE_COVERAGE` of the fitted surface facing it has points on it); a fit can carry both:\n\n| cloud | band | cases | success |\n|---|---|---:|---:|\n";

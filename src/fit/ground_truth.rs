@@ -16,7 +16,10 @@ pub struct Case {
     /// noise sigma as a fraction of the size
     pub noise: f64,
     pub outlier_fraction: f64,
+    /// the cloud: its first `inliers` points are the (noisy) surface points, the rest the
+    /// outliers
     pub points: Vec<DVec3>,
+    pub inliers: usize,
     /// the camera's position for a single-view cloud
     pub viewpoint: Option<DVec3>,
 }
@@ -58,6 +61,7 @@ pub fn make_case(seed: u64, partial: bool, noise: f64, outlier_fraction: f64) ->
         (synth::sample_surface(&shape, &pose, 2000, &mut rng), None)
     };
     synth::add_noise(&mut points, noise * shape.size(), &mut rng);
+    let inliers = points.len();
     synth::add_outliers(&mut points, &shape, &pose, outlier_fraction, &mut rng);
     Case {
         shape,
@@ -66,6 +70,7 @@ pub fn make_case(seed: u64, partial: bool, noise: f64, outlier_fraction: f64) ->
         noise,
         outlier_fraction,
         points,
+        inliers,
         viewpoint,
     }
 }

@@ -29,6 +29,7 @@
 //! point set of the evaluator, each start names its cloud's set), so one batched
 //! evaluation per solver iteration serves every cloud; [`fit`] is a batch of one.
 
+pub mod attainable;
 pub mod coverage;
 pub mod free_space;
 pub mod ground_truth;
