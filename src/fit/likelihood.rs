@@ -414,6 +414,53 @@ struct Surface {
     area: f64,
 }
 
+impl<'a> Problem<'a> {
+    /// The problem on `points` and the parameter vector of `candidate` with noise
+    /// `sigma` (the turn zero: the candidate's rotation is the reference); None where
+    /// the model does not apply (no hole: a4 <= 1; sigma not positive; under 20 points).
+    fn at(
+        points: &'a [DVec3],
+        candidate: &Candidate,
+        sigma: f64,
+        outlier_weight: f64,
+        viewpoint: Option<DVec3>,
+        cutoff: f64,
+    ) -> Option<(Self, Vector)> {
+        let s = candidate.shape;
+        if s.a4 <= 1.0 || !(sigma > 0.0) || points.len() < 20 {
+            return None;
+        }
+        let (lo, hi) = bounding_box(points);
+        let volume = (hi - lo).max(DVec3::splat(sigma)).element_product();
+        let problem = Problem {
+            points,
+            outlier_weight,
+            outlier_density: outlier_weight / volume,
+            rotation0: candidate.pose.rotation,
+            grid: grid_for(&s.to_array(), sigma),
+            viewpoint,
+            cutoff,
+        };
+        let t = candidate.pose.translation;
+        let x = Vector::from_column_slice(&[
+            s.a1,
+            s.a2,
+            s.a3,
+            s.a4,
+            s.eps1,
+            s.eps2,
+            t.x,
+            t.y,
+            t.z,
+            0.0,
+            0.0,
+            0.0,
+            sigma.ln(),
+        ]);
+        Some((problem, x))
+    }
+}
+
 impl Problem<'_> {
     fn rotation(&self, x: &Vector) -> DQuat {
         DQuat::from_scaled_axis(DVec3::new(x[9], x[10], x[11])) * self.rotation0
@@ -653,37 +700,8 @@ pub fn refine(
     limits: &Limits,
     max_iterations: usize,
 ) -> Option<Refined> {
-    let s = start.shape;
-    if s.a4 <= 1.0 || !(sigma > 0.0) || points.len() < 20 {
-        return None;
-    }
-    let (lo, hi) = bounding_box(points);
-    let volume = (hi - lo).max(DVec3::splat(sigma)).element_product();
-    let mut problem = Problem {
-        points,
-        outlier_weight,
-        outlier_density: outlier_weight / volume,
-        rotation0: start.pose.rotation,
-        grid: grid_for(&s.to_array(), sigma),
-        viewpoint,
-        cutoff: CUTOFF,
-    };
-    let t = start.pose.translation;
-    let mut x = Vector::from_column_slice(&[
-        s.a1,
-        s.a2,
-        s.a3,
-        s.a4,
-        s.eps1,
-        s.eps2,
-        t.x,
-        t.y,
-        t.z,
-        0.0,
-        0.0,
-        0.0,
-        sigma.ln(),
-    ]);
+    let (mut problem, mut x) =
+        Problem::at(points, start, sigma, outlier_weight, viewpoint, CUTOFF)?;
     let axis = start.pose.axis();
     // what is held fixed leaves the step: known shape parameters, and with a known axis
     // every turn but the one about it
@@ -799,37 +817,14 @@ pub fn scores(
     outlier_weight: f64,
     viewpoint: Option<DVec3>,
 ) -> Option<Scores> {
-    let s = candidate.shape;
-    if s.a4 <= 1.0 || !(sigma > 0.0) || points.len() < 20 {
-        return None;
-    }
-    let (lo, hi) = bounding_box(points);
-    let volume = (hi - lo).max(DVec3::splat(sigma)).element_product();
-    let problem = Problem {
+    let (problem, x) = Problem::at(
         points,
+        candidate,
+        sigma,
         outlier_weight,
-        outlier_density: outlier_weight / volume,
-        rotation0: candidate.pose.rotation,
-        grid: grid_for(&s.to_array(), sigma),
         viewpoint,
-        cutoff: SCORE_CUTOFF,
-    };
-    let t = candidate.pose.translation;
-    let x = Vector::from_column_slice(&[
-        s.a1,
-        s.a2,
-        s.a3,
-        s.a4,
-        s.eps1,
-        s.eps2,
-        t.x,
-        t.y,
-        t.z,
-        0.0,
-        0.0,
-        0.0,
-        sigma.ln(),
-    ]);
+        SCORE_CUTOFF,
+    )?;
     let (_, gradient, outer) = problem.evaluate(&x, true);
     (outer.iter().chain(gradient.iter()).all(|v| v.is_finite())).then_some(Scores {
         mean: -gradient,
