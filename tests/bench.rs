@@ -167,9 +167,19 @@ fn bench_synthetic_and_scaling_write_every_field() {
                 "noise_ratio",
                 "noise_warning",
                 "coverage_warning",
+                "attainable",
             ],
         );
+        // the efficient estimator's share (`fit::attainable`): a probability, and
+        // certain on a noise-free cloud
+        let attainable = c["attainable"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&attainable), "{attainable}");
+        if c["noise"].as_f64() == Some(0.0) {
+            assert_eq!(attainable, 1.0);
+        }
     }
+    let overall = v["attainable_overall_rate"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&overall), "{overall}");
     assert_eq!(v["categories"].as_array().unwrap().len(), 5);
     png_with_content(&out.join("synthetic-errors.png"), 5 * 300, 300);
     let failures = cases.iter().filter(|c| c["success"] == false).count();

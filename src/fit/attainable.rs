@@ -29,20 +29,10 @@ use rand_distr::{Distribution, StandardNormal};
 /// share keeps the density of a point beyond the kernel's cutoff above zero).
 const OUTLIER_ALLOWANCE: f64 = 1e-3;
 
-/// The bound at one cloud: the efficient estimator's success share and the standard
-/// deviations the bound allows.
-#[derive(Clone, Copy, Debug)]
-pub struct Attainable {
-    /// the share of draws within the suite's tolerances
-    pub success: f64,
-    /// standard deviations in world units: a1 a2 a3 a4 eps1 eps2, translation x y z,
-    /// rotation (radians, about world x y z)
-    pub std: [f64; 12],
-}
-
 /// The Cramér-Rao bound of `inliers` (world units, drawn with isotropic noise `sigma`
 /// about the surface of `shape` at `pose`, seen from `viewpoint` for a single view),
-/// turned into the suite's success share by `draws` seeded Gaussian draws. None where the
+/// turned into the suite's success share (the share of `draws` seeded Gaussian draws
+/// within its tolerances). None where the
 /// model does not apply (no hole: a4 <= 1; sigma zero; fewer than 20 points) or the
 /// information is not finite.
 pub fn efficient_success(
@@ -53,7 +43,7 @@ pub fn efficient_success(
     viewpoint: Option<DVec3>,
     draws: usize,
     seed: u64,
-) -> Option<Attainable> {
+) -> Option<f64> {
     let norm = Normalization::of(inliers);
     let points = norm.points(inliers);
     let truth = norm.candidate(shape, pose);
@@ -78,17 +68,6 @@ pub fn efficient_success(
                 .eigenvalues
                 .map(|l| 1.0 / l.max(largest * 1e-14).sqrt()),
         );
-    let covariance = root_covariance * root_covariance.transpose();
-    let mut std = [0.0; 12];
-    for (k, sd) in std.iter_mut().enumerate() {
-        // a1..a3 and the translation are lengths; a4, eps and the turn are unitless
-        let unit = if k < 3 || (6..9).contains(&k) {
-            norm.scale
-        } else {
-            1.0
-        };
-        *sd = covariance[(k, k)].sqrt() * unit;
-    }
     let mut rng = synth::rng(seed);
     let mut successes = 0;
     for _ in 0..draws {
@@ -98,10 +77,7 @@ pub fn efficient_success(
         let (s, p) = norm.to_world(&fitted);
         successes += compare((shape, pose), (&s, &p)).success() as usize;
     }
-    Some(Attainable {
-        success: successes as f64 / draws.max(1) as f64,
-        std,
-    })
+    Some(successes as f64 / draws.max(1) as f64)
 }
 
 /// The truth moved by one error vector (parameters as in [`likelihood::PARAMETERS`]), the
@@ -135,12 +111,9 @@ pub const SUITE_DRAWS: usize = 2000;
 /// The efficient estimator's success share on a case of the ground-truth suite, from
 /// its inliers (outliers are what such an estimator would set aside). A noise-free case
 /// has no bound short of exactness: 1. None where [`efficient_success`] has none.
-pub fn suite_case(case: &Case, seed: u64) -> Option<Attainable> {
+pub fn suite_case(case: &Case, seed: u64) -> Option<f64> {
     if case.noise == 0.0 {
-        return Some(Attainable {
-            success: 1.0,
-            std: [0.0; 12],
-        });
+        return Some(1.0);
     }
     efficient_success(
         &case.shape,
@@ -210,9 +183,7 @@ mod tests {
             let mut rng = synth::rng(8);
             let mut points = synth::sample_surface(&shape, &pose, 2000, &mut rng);
             synth::add_noise(&mut points, sigma, &mut rng);
-            efficient_success(&shape, &pose, &points, sigma, None, 1000, 1)
-                .unwrap()
-                .success
+            efficient_success(&shape, &pose, &points, sigma, None, 1000, 1).unwrap()
         };
         let (low, high) = (success(0.005), success(0.08));
         assert!(low > 0.99, "at 0.5% noise: {low}");
