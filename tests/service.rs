@@ -250,6 +250,18 @@ fn a_paper_cloud_as_pcd_and_as_json_gives_the_cli_result() {
     assert_eq!(bad.status(), 422);
     assert!(bad.text().unwrap().contains("retries"));
 
+    // the thorough search is a boolean too
+    let thorough = post_pcd(
+        &c,
+        &server,
+        bytes.clone(),
+        "?viewpoint=0,0,-2&thorough=true",
+    );
+    assert_eq!(thorough.status(), 200);
+    let bad = post_pcd(&c, &server, bytes.clone(), "?thorough=very");
+    assert_eq!(bad.status(), 422);
+    assert!(bad.text().unwrap().contains("thorough"));
+
     // the noise model can be turned off, and the option is a boolean
     let plain = post_pcd(&c, &server, bytes.clone(), "?noise_model=false");
     assert_eq!(plain.status(), 200);
