@@ -488,6 +488,9 @@ fn retry_unseen_surfaces(
     for &i in &uncovered {
         let first = results[i].as_ref().expect("uncovered fits are fits");
         let spent: f64 = first.timing_ms.total;
+        let (cloud, cloud_options) = clouds[i];
+        let common = searched_thoroughly(cloud_options, first)
+            .then(|| CommonSample::new(cloud, cloud_options));
         let best = options
             .iter()
             .zip(&retries)
@@ -502,12 +505,10 @@ fn retry_unseen_surfaces(
                         .is_none_or(|v| v <= free_space::MAX_VIOLATED_FRACTION)
             })
             .map(|r| {
-                let (points, options) = clouds[i];
                 // (a noise-free view is told by its distances; the model's premise is noise)
-                let merit = if searched_thoroughly(options, first) {
-                    negative_log_likelihood(points, options, r)
-                } else {
-                    r.quality.median_distance
+                let merit = match &common {
+                    Some(common) => common.negative_log_likelihood(r),
+                    None => r.quality.median_distance,
                 };
                 (merit, r)
             })
@@ -515,8 +516,7 @@ fn retry_unseen_surfaces(
             .map(|(_, r)| r)
             .cloned();
         let best = best.or_else(|| {
-            let (points, options) = clouds[i];
-            rescue_unseen_surface(evaluator, points, options, first).map(|mut r| {
+            rescue_unseen_surface(evaluator, cloud, cloud_options, first).map(|mut r| {
                 r.timing_ms = first.timing_ms.clone();
                 r
             })
@@ -541,31 +541,48 @@ fn searched_thoroughly(options: &FitOptions, r: &FitReport) -> bool {
         && r.quality.noise_sigma >= LIKELIHOOD_VIEW_NOISE_RATIO * r.fitted.0.thinnest_half_axis()
 }
 
-/// The noise model's mean negative log-likelihood of one seeded 1000-point sample of the
-/// cloud (the same for every fit of it, so fits from other samples compare) under a
-/// fit, at its own noise estimate; infinite for a fit the model does not cover (no hole).
-fn negative_log_likelihood(points: &[DVec3], options: &FitOptions, r: &FitReport) -> f64 {
-    let norm = Normalization::of(points);
-    let sample = synth::subsample(
-        &norm.points(points),
-        options.stage2_points,
-        &mut synth::rng(options.seed),
-    );
-    let limits = likelihood::Limits {
-        bounds: options.bounds(),
-        fixed_shape: [false; 6],
-        fixed_axis: false,
-    };
-    likelihood::refine(
-        &sample,
-        &norm.candidate(&r.fitted.0, &r.fitted.1),
-        (r.quality.noise_sigma / norm.scale).max(1e-6),
-        LIKELIHOOD_OUTLIER_WEIGHT,
-        options.viewpoint.map(|v| norm.point(v)),
-        &limits,
-        0,
-    )
-    .map_or(f64::INFINITY, |m| m.objective)
+/// One seeded sample of a cloud (`stage2_points` of it, normalised) that every fit of the
+/// cloud is scored on, so that fits from other samples compare.
+struct CommonSample<'a> {
+    norm: Normalization,
+    points: Vec<DVec3>,
+    options: &'a FitOptions,
+}
+
+impl<'a> CommonSample<'a> {
+    fn new(cloud: &[DVec3], options: &'a FitOptions) -> Self {
+        let norm = Normalization::of(cloud);
+        let points = synth::subsample(
+            &norm.points(cloud),
+            options.stage2_points,
+            &mut synth::rng(options.seed),
+        );
+        Self {
+            norm,
+            points,
+            options,
+        }
+    }
+
+    /// The noise model's mean negative log-likelihood of the sample under a fit, at the
+    /// fit's own noise estimate; infinite for a fit the model does not cover (no hole).
+    fn negative_log_likelihood(&self, r: &FitReport) -> f64 {
+        let limits = likelihood::Limits {
+            bounds: self.options.bounds(),
+            fixed_shape: [false; 6],
+            fixed_axis: false,
+        };
+        likelihood::refine(
+            &self.points,
+            &self.norm.candidate(&r.fitted.0, &r.fitted.1),
+            (r.quality.noise_sigma / self.norm.scale).max(1e-6),
+            LIKELIHOOD_OUTLIER_WEIGHT,
+            self.options.viewpoint.map(|v| self.norm.point(v)),
+            &limits,
+            0,
+        )
+        .map_or(f64::INFINITY, |m| m.objective)
+    }
 }
 
 /// A viewpoint the fit contradicts is not where the sensor was (a cloud in another frame
