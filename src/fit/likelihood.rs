@@ -266,12 +266,13 @@ fn visibility(
         .map(|(p, (cell, normal))| {
             p.is_some_and(|(u, w, r)| {
                 // a closed surface shows only the cells that face the sensor
-                if normal.dot(*cell - viewpoint) >= 0.0 {
+                let facing = normal.dot(*cell - viewpoint);
+                if facing >= 0.0 {
                     return false;
                 }
                 // a pixel's width there (diagonal: the nearest cell may sit in a corner)
                 // times tan(incidence), the incidence cosine floored at 0.1
-                let cos = (normal.dot(*cell - viewpoint).abs() / r).max(0.1);
+                let cos = (-facing / r).max(0.1);
                 let slope = std::f64::consts::SQRT_2 * pixel * r * (1.0 - cos * cos).sqrt() / cos;
                 r <= nearest[index(u, w)] + tolerance + slope
             })
@@ -830,6 +831,21 @@ pub fn scores(
         mean: -gradient,
         information: outer,
     })
+}
+
+/// The model's mean negative log-likelihood of `points` at `candidate` and `sigma`
+/// (normalised units; `outlier_weight` as in [`refine`]), without the gradient: what
+/// [`Refined::objective`] reports, for comparing fits made on other samples. None where
+/// [`refine`] would not run.
+pub fn objective(
+    points: &[DVec3],
+    candidate: &Candidate,
+    sigma: f64,
+    outlier_weight: f64,
+    viewpoint: Option<DVec3>,
+) -> Option<f64> {
+    let (problem, x) = Problem::at(points, candidate, sigma, outlier_weight, viewpoint, CUTOFF)?;
+    Some(problem.evaluate(&x, false).0)
 }
 
 /// The points' scores at one parameter vector ([`scores`]).

@@ -180,8 +180,8 @@ pub struct FitOptions {
     /// with a viewpoint and the noise model: every single view noisy enough for the model
     /// ([`LIKELIHOOD_VIEW_NOISE_RATIO`]) is retried like an uncovered one, and of the
     /// covered fits the most likely under the model stands (see
-    /// `retry_unseen_surfaces`). Measured on the ground-truth suite: 508 -> 513 of 540
-    /// within tolerance, the single views' median time 73-80 -> 264-297 ms; off by
+    /// `retry_unseen_surfaces`). Measured on the ground-truth suite: 508 -> 514 of 540
+    /// within tolerance, the single views' median time 73-80 -> 289-306 ms; off by
     /// default
     pub thorough: bool,
 }
@@ -543,14 +543,14 @@ fn searched_thoroughly(options: &FitOptions, r: &FitReport) -> bool {
 
 /// One seeded sample of a cloud (`stage2_points` of it, normalised) that every fit of the
 /// cloud is scored on, so that fits from other samples compare.
-struct CommonSample<'a> {
+struct CommonSample {
     norm: Normalization,
     points: Vec<DVec3>,
-    options: &'a FitOptions,
+    viewpoint: Option<DVec3>,
 }
 
-impl<'a> CommonSample<'a> {
-    fn new(cloud: &[DVec3], options: &'a FitOptions) -> Self {
+impl CommonSample {
+    fn new(cloud: &[DVec3], options: &FitOptions) -> Self {
         let norm = Normalization::of(cloud);
         let points = synth::subsample(
             &norm.points(cloud),
@@ -560,28 +560,21 @@ impl<'a> CommonSample<'a> {
         Self {
             norm,
             points,
-            options,
+            viewpoint: options.viewpoint.map(|v| norm.point(v)),
         }
     }
 
     /// The noise model's mean negative log-likelihood of the sample under a fit, at the
     /// fit's own noise estimate; infinite for a fit the model does not cover (no hole).
     fn negative_log_likelihood(&self, r: &FitReport) -> f64 {
-        let limits = likelihood::Limits {
-            bounds: self.options.bounds(),
-            fixed_shape: [false; 6],
-            fixed_axis: false,
-        };
-        likelihood::refine(
+        likelihood::objective(
             &self.points,
             &self.norm.candidate(&r.fitted.0, &r.fitted.1),
             (r.quality.noise_sigma / self.norm.scale).max(1e-6),
             LIKELIHOOD_OUTLIER_WEIGHT,
-            self.options.viewpoint.map(|v| self.norm.point(v)),
-            &limits,
-            0,
+            self.viewpoint,
         )
-        .map_or(f64::INFINITY, |m| m.objective)
+        .unwrap_or(f64::INFINITY)
     }
 }
 
