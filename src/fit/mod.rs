@@ -181,8 +181,8 @@ pub struct FitOptions {
     /// ([`LIKELIHOOD_VIEW_NOISE_RATIO`]) is retried like an uncovered one, and of the
     /// covered fits the most likely under the model stands (see
     /// `retry_unseen_surfaces`). Measured on the ground-truth suite: 508 -> 514 of 540
-    /// within tolerance, the single views' median time 73-80 -> 289-306 ms; off by
-    /// default
+    /// within tolerance, the single views' median time 73-80 -> 289-306 ms (510 -> 516
+    /// since the other reading of the top view, [`starts::turned_dual`]); off by default
     pub thorough: bool,
 }
 
