@@ -1098,6 +1098,7 @@ fn refine_noisy(p: &Prepared, solution: Solution) -> (Solution, Option<f64>) {
     {
         return (solution, None);
     }
+    let limits = p.likelihood_limits(&c);
     let refine = |start: &Candidate, sigma: f64, iterations: usize| {
         likelihood::refine(
             &p.stage2_pts,
@@ -1105,7 +1106,7 @@ fn refine_noisy(p: &Prepared, solution: Solution) -> (Solution, Option<f64>) {
             sigma,
             LIKELIHOOD_OUTLIER_WEIGHT,
             p.viewpoint,
-            &p.likelihood_limits(&c),
+            &limits,
             iterations,
         )
     };
@@ -1359,12 +1360,12 @@ impl Prepared<'_> {
         let duals: Vec<likelihood::Refined> = kept
             .iter()
             .filter_map(|r| {
-                let first = refine(
+                let opening = refine(
                     &self.turned_dual(&r.candidate)?,
                     r.sigma,
                     DUAL_FIRST_ITERATIONS,
                 )?;
-                (first.objective < r.objective).then(|| converge(&first, &first.candidate))?
+                (opening.objective < r.objective).then(|| converge(&opening, &opening.candidate))?
             })
             .collect();
         // (a dual must be more likely by DUAL_READING_MARGIN)

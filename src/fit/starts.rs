@@ -181,8 +181,8 @@ pub fn axis_point_for_direction(points: &[DVec3], normals: &[DVec3], d: DVec3) -
     on_axis.is_finite().then_some(on_axis)
 }
 
-/// The other reading of a top view: a superellipse with exponent eps2 turned a quarter of
-/// a right angle about the hole axis looks like one with exponent 2 - eps2 (a diamond,
+/// The other reading of a top view: a superellipse with exponent eps2 turned 45 degrees
+/// about the hole axis looks like one with exponent 2 - eps2 (a diamond,
 /// eps2 = 2, is a square, eps2 -> 0, turned 45 degrees; a circle, eps2 = 1, is itself).
 /// The sizes keep the radius along the new x axis: a superellipse of radius a and
 /// exponent e reaches √2·a·2^(-e/2) at 45 degrees. A one-sided view often fits both
