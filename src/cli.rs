@@ -99,6 +99,9 @@ pub struct BenchArgs {
     /// fit as `fit --thorough` does (paper, synthetic)
     #[arg(long, global = true)]
     pub thorough: bool,
+    /// as `fit --retries` (synthetic: its single views have the camera's position)
+    #[arg(long, global = true, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=crate::fit::MAX_UNSEEN_SURFACE_RETRIES))]
+    pub retries: u64,
 }
 
 #[derive(Subcommand, Debug)]
@@ -569,6 +572,7 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
     let options = crate::fit::FitOptions {
         method: args.method,
         thorough: args.thorough,
+        unseen_surface_retries: args.retries,
         ..Default::default()
     };
     let render = args

@@ -296,3 +296,31 @@ fn the_grading_rule_calls_the_truth_good_and_a_planted_fit_bad() {
     );
     assert_eq!(far.grade, Grade::Decent, "{far:?}");
 }
+
+/// `bench --retries` is `fit --retries`: 0 to 16, anything else a usage error.
+#[test]
+fn bench_takes_the_retries_of_fit() {
+    let out = out_dir("retries");
+    let v = bench(
+        &[
+            "synthetic",
+            "--cases",
+            "2",
+            "--backend",
+            "cpu",
+            "--retries",
+            "0",
+        ],
+        &out,
+        "synthetic",
+    );
+    assert_eq!(v["cases"].as_array().unwrap().len(), 2);
+    let o = Command::new(env!("CARGO_BIN_EXE_supertoroid"))
+        .args(["bench", "synthetic", "--cases", "1", "--retries", "17"])
+        .args(["--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("--retries"), "{stderr}");
+}
