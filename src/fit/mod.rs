@@ -1156,8 +1156,8 @@ pub const DUAL_READING_MARGIN: f64 = 0.05;
 /// A top view whose eps2 is within this of 1 (an ellipse) is not read the other way.
 const DUAL_MIN_ROUNDNESS_GAP: f64 = 0.25;
 /// The other reading goes on to convergence only when it is more likely than the model's
-/// fit after this many iterations (8 gave the same 510 of 540, a few ms slower).
-const DUAL_FIRST_ITERATIONS: usize = 4;
+/// fit after this many iterations.
+const DUAL_FIRST_ITERATIONS: usize = 8;
 
 /// The a4 of the collapsed starts of [`rescue_unseen_surface`]: a small, a middling and
 /// a wide hole (the suite's a4 is in [1.2, 3]).
