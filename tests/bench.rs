@@ -14,13 +14,18 @@ fn out_dir(name: &str) -> std::path::PathBuf {
     d
 }
 
-fn bench(args: &[&str], out: &std::path::Path, name: &str) -> Value {
-    let o = Command::new(env!("CARGO_BIN_EXE_supertoroid"))
+/// `supertoroid bench ARGS --out OUT`, its output whatever the exit.
+fn run_bench(args: &[&str], out: &std::path::Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_supertoroid"))
         .arg("bench")
         .args(args)
         .args(["--out", out.to_str().unwrap()])
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+fn bench(args: &[&str], out: &std::path::Path, name: &str) -> Value {
+    let o = run_bench(args, out);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let md = std::fs::read_to_string(out.join(format!("{name}.md"))).unwrap();
     assert!(md.contains("Machine:") && md.contains('|'), "{md}");
@@ -315,11 +320,7 @@ fn bench_takes_the_retries_of_fit() {
         "synthetic",
     );
     assert_eq!(v["cases"].as_array().unwrap().len(), 2);
-    let o = Command::new(env!("CARGO_BIN_EXE_supertoroid"))
-        .args(["bench", "synthetic", "--cases", "1", "--retries", "17"])
-        .args(["--out", out.to_str().unwrap()])
-        .output()
-        .unwrap();
+    let o = run_bench(&["synthetic", "--cases", "1", "--retries", "17"], &out);
     assert!(!o.status.success());
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(stderr.contains("--retries"), "{stderr}");
