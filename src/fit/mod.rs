@@ -915,6 +915,7 @@ fn fit_group(
         stage1_iterations.push(solutions.iter().map(|s| s.iterations).max().unwrap_or(0));
         finalists.push(stage1_finalists(&solutions, p));
     }
+    spin_about_axis(evaluator, group, &mut finalists, &opts1)?;
     let t1 = start.elapsed();
 
     // Stage 2: the finalists of every cloud, on its cloud's 1000-point sample.
@@ -996,6 +997,101 @@ fn fit_group(
         r.timing_ms = timing.clone();
     }
     Ok(reports)
+}
+
+/// Turns about the hole axis at which [`spin_about_axis`] starts stage 1's best fit
+/// again (degrees; a1 and a2 kept, so 90 degrees is the top view with a1 and a2 swapped,
+/// 45 and 135 the readings of [`starts::turned_dual`]'s kind).
+const SPINS_DEGREES: [f64; 3] = [45.0, 90.0, 135.0];
+/// Solver iterations of each turned start (on the stage-1 sample). 12 and 30 gained the
+/// same cases on the suite.
+const SPIN_ITERATIONS: usize = 12;
+/// A turned fit goes to stage 2 when its median distance on the stage-1 sample is below
+/// this fraction of the best fit's.
+const SPIN_MEDIAN_RATIO: f64 = 0.5;
+
+/// Least squares settles a lopsided top view (a1 far from a2, or eps2 far from 1) in the
+/// orientation about the hole axis its start had: on noise-free clouds of the suite
+/// (20135, a single view, and 20162, a full cloud) stage 1's best fit sat in a basin
+/// turned about the right axis, leaving 15% of the points off the surface, while the same
+/// fit turned 45, 90 or 135 degrees and solved again lay on every point. So stage 1's
+/// best fit of each cloud is turned by [`SPINS_DEGREES`] and solved a few iterations on
+/// the stage-1 sample (one batch for the group); a turned fit whose median distance is
+/// under [`SPIN_MEDIAN_RATIO`] of the best fit's (a noise-free cloud lies on the right
+/// basin's surface exactly; on a noisy one the median is the noise's, and the turn
+/// rarely halves it), and that does not overreach where the best fit did not, joins the
+/// finalists of stage 2 first. Measured on the suite (540 cases, seeds 10000, 20000,
+/// 30000): 510 -> 512 within tolerance (20135 and 20162 gained, none lost); the paper
+/// clouds' fits about 1 ms longer.
+fn spin_about_axis(
+    evaluator: &mut dyn Evaluator,
+    group: &[(usize, Prepared)],
+    finalists: &mut [Vec<Candidate>],
+    opts1: &SolverOptions,
+) -> Result<(), FitError> {
+    let mut starts = Vec::new();
+    let mut sets = Vec::new();
+    for (cloud, (_, p)) in group.iter().enumerate() {
+        if p.method != Method::Default || p.known_axis {
+            continue;
+        }
+        let c = finalists[cloud][0];
+        for degrees in SPINS_DEGREES {
+            starts.push(Candidate {
+                pose: Pose::new(
+                    c.pose.rotation * DQuat::from_rotation_z(degrees.to_radians()),
+                    c.pose.translation,
+                ),
+                ..c
+            });
+            sets.push(cloud);
+        }
+    }
+    if starts.is_empty() {
+        return Ok(());
+    }
+    let bounds = vec![group[0].1.bounds; starts.len()];
+    let options = SolverOptions {
+        max_iterations: SPIN_ITERATIONS,
+        ..*opts1
+    };
+    let solved = solve_on(evaluator, &starts, &sets, &bounds, &options)?;
+    // judged by the median distance, which outliers do not move: the turned solutions'
+    // and each spun cloud's best fit's, on the stage-1 sample
+    let mut all: Vec<Candidate> = solved.iter().map(|s| s.candidate).collect();
+    let mut all_sets = sets.clone();
+    for cloud in 0..group.len() {
+        if sets.contains(&cloud) {
+            all.push(finalists[cloud][0]);
+            all_sets.push(cloud);
+        }
+    }
+    let residuals = evaluator.residuals_on(&all, &all_sets)?;
+    let mut medians = Vec::with_capacity(all.len());
+    let mut offset = 0;
+    for &cloud in &all_sets {
+        let n = group[cloud].1.stage1_pts.len();
+        let mut m: Vec<f64> = residuals[offset..offset + n]
+            .iter()
+            .map(|x| x.abs())
+            .collect();
+        offset += n;
+        medians.push(*m.select_nth_unstable_by(n / 2, f64::total_cmp).1);
+    }
+    for (cloud, (_, p)) in group.iter().enumerate() {
+        let Some(best) = (solved.len()..all.len()).find(|&k| all_sets[k] == cloud) else {
+            continue;
+        };
+        let over = |c: &Candidate| p.overreaches(c, &p.stage1_pts);
+        if let Some(k) = (0..solved.len())
+            .filter(|&k| sets[k] == cloud && (!over(&all[k]) || over(&all[best])))
+            .min_by(|&a, &b| medians[a].total_cmp(&medians[b]))
+            && medians[k] < SPIN_MEDIAN_RATIO * medians[best]
+        {
+            finalists[cloud].insert(0, all[k]);
+        }
+    }
+    Ok(())
 }
 
 /// The end of stage 2: each cloud's chosen solution solved again under a Cauchy loss
