@@ -1076,7 +1076,7 @@ fn spin_about_axis(
             .map(|x| x.abs())
             .collect();
         offset += n;
-        medians.push(*m.select_nth_unstable_by(n / 2, f64::total_cmp).1);
+        medians.push(report::median(&mut m));
     }
     for (cloud, (_, p)) in group.iter().enumerate() {
         let Some(best) = (solved.len()..all.len()).find(|&k| all_sets[k] == cloud) else {
@@ -1130,7 +1130,7 @@ fn refine_robustly(
             refined.push(solution);
             continue;
         };
-        let median = *magnitudes.select_nth_unstable_by(n / 2, f64::total_cmp).1;
+        let median = report::median(&mut magnitudes);
         // a floor for clouds that lie on the surface exactly (normalised units: 1e-4 of
         // the cloud's RMS radius)
         let sigma = (1.4826 * median).max(1e-4);

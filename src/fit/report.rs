@@ -196,7 +196,7 @@ pub fn noise_sigma(shape: &Shape, pose: &Pose, points: &[DVec3], sample: usize) 
 }
 
 /// The upper median (0 for no values); reorders `values`.
-fn median(values: &mut [f64]) -> f64 {
+pub(super) fn median(values: &mut [f64]) -> f64 {
     if values.is_empty() {
         return 0.0;
     }
