@@ -138,24 +138,34 @@ fn bounded_linear_least_squares() {
     }
 }
 
-#[test]
-fn rosenbrock_with_an_active_bound() {
-    // 100(y - x^2)^2 + (1 - x)^2 with x <= 0.5: the minimum is (0.5, 0.25).
-    fn r(t: &[f64; 9]) -> (Vec<f64>, Vec<[f64; 9]>) {
-        let (x, y) = (t[0], t[1]);
-        let mut j1 = [0.0; 9];
-        j1[0] = -20.0 * x;
-        j1[1] = 10.0;
-        let mut j2 = [0.0; 9];
-        j2[0] = -1.0;
-        (vec![10.0 * (y - x * x), 1.0 - x], vec![j1, j2])
-    }
+/// 100(y - x^2)^2 + (1 - x)^2 in (a1, a2).
+fn rosenbrock(t: &[f64; 9]) -> (Vec<f64>, Vec<[f64; 9]>) {
+    let (x, y) = (t[0], t[1]);
+    let mut j1 = [0.0; 9];
+    j1[0] = -20.0 * x;
+    j1[1] = 10.0;
+    let mut j2 = [0.0; 9];
+    j2[0] = -1.0;
+    (vec![10.0 * (y - x * x), 1.0 - x], vec![j1, j2])
+}
+
+/// Rosenbrock's box (a1 <= 0.5, so the minimum is (0.5, 0.25)) and options that solve
+/// for a1 and a2 alone.
+fn rosenbrock_problem() -> (Bounds, SolverOptions) {
     let mut bounds = Bounds::new(0.01, 5.0, 4.0, 0.1, 2.0);
     bounds.upper[0] = 0.5;
     let mut o = rotation_fixed();
     for k in 2..6 {
         o.fixed[k] = true;
     }
+    (bounds, o)
+}
+
+#[test]
+fn rosenbrock_with_an_active_bound() {
+    // 100(y - x^2)^2 + (1 - x)^2 with x <= 0.5: the minimum is (0.5, 0.25).
+    let r = rosenbrock;
+    let (bounds, o) = rosenbrock_problem();
     let mut mock = Mock {
         residuals: r,
         seen: Vec::new(),
@@ -202,6 +212,63 @@ fn each_start_keeps_to_its_own_box() {
     assert!((a2(1) - 1.2).abs() < 1e-3, "tight box: a2 = {}", a2(1));
     // one box per start, or an error
     assert!(solve_on(&mut mock, &[start([1.0; 6])], &[0], &[], &rotation_fixed()).is_err());
+}
+
+#[test]
+fn starts_that_meet_run_on_as_one() {
+    // two starts of one point set head for Rosenbrock's constrained minimum; a third, as
+    // close, belongs to another set and must not be merged with them
+    let (bounds, mut o) = rosenbrock_problem();
+    let starts = [
+        start([0.05, 2.0, 1.0, 1.0, 1.0, 1.0]),
+        start([0.07, 2.1, 1.0, 1.0, 1.0, 1.0]),
+        start([0.07, 2.1, 1.0, 1.0, 1.0, 1.0]),
+    ];
+    let sets = [0, 0, 1];
+    let mut run = |o: &SolverOptions| {
+        let mut mock = Mock {
+            residuals: rosenbrock,
+            seen: Vec::new(),
+        };
+        let sols = solve_on(&mut mock, &starts, &sets, &[bounds; 3], o).unwrap();
+        (sols, mock.seen.len())
+    };
+    let (apart, evaluations_apart) = run(&o);
+    assert!(apart.iter().all(|s| s.stop != Stop::Merged));
+    o.merge_tolerance = 1e-2;
+    let (merged, evaluations_merged) = run(&o);
+    let stops: Vec<Stop> = merged.iter().map(|s| s.stop).collect();
+    assert_eq!(
+        stops.iter().filter(|s| **s == Stop::Merged).count(),
+        1,
+        "{stops:?}"
+    );
+    assert_ne!(
+        stops[2],
+        Stop::Merged,
+        "merged across point sets: {stops:?}"
+    );
+    for (m, a) in merged.iter().zip(&apart) {
+        let (x, y) = (m.candidate.shape.a1, m.candidate.shape.a2);
+        assert!(
+            (x - 0.5).abs() < 1e-3 && (y - 0.25).abs() < 1e-3,
+            "got ({x}, {y}), {:?}",
+            m.stop
+        );
+        assert!((m.candidate.shape.a2 - a.candidate.shape.a2).abs() < 1e-3);
+    }
+    // the merged start reports the solution of the start it met
+    let (gone, kept) = if stops[0] == Stop::Merged {
+        (0, 1)
+    } else {
+        (1, 0)
+    };
+    assert_eq!(merged[gone].candidate, merged[kept].candidate);
+    assert_eq!(merged[gone].cost, merged[kept].cost);
+    assert!(
+        evaluations_merged < evaluations_apart,
+        "{evaluations_merged} evaluations merged, {evaluations_apart} apart"
+    );
 }
 
 proptest! {

@@ -74,6 +74,11 @@ pub struct SolverOptions {
     /// basins that can still win
     pub prune_after: usize,
     pub prune_ratio: f64,
+    /// when two running starts of one point set (and one box) come this close (largest
+    /// difference of a shape parameter, of a translation component, and rotation angle
+    /// in radians; 0: never), the one with the higher cost stops and takes the other's
+    /// solution: multi-start batches often send several starts into one basin
+    pub merge_tolerance: f64,
 }
 
 impl Default for SolverOptions {
@@ -88,6 +93,7 @@ impl Default for SolverOptions {
             fixed: [false; NUM_PARAMS],
             prune_after: 0,
             prune_ratio: 2.0,
+            merge_tolerance: 0.0,
         }
     }
 }
@@ -103,6 +109,9 @@ pub enum Stop {
     NoProgress,
     /// dropped from a batch because its cost was far above the best start's
     Pruned,
+    /// met another start of its batch (see [`SolverOptions::merge_tolerance`]) and
+    /// reports that start's solution
+    Merged,
 }
 
 /// One line of the iteration log.
@@ -253,6 +262,8 @@ pub fn solve_on(
             }
         })
         .collect();
+    // for each start stopped by merging, the start it met
+    let mut merged_into: Vec<Option<usize>> = vec![None; states.len()];
 
     for iteration in 0..o.max_iterations {
         if o.prune_after > 0 && iteration == o.prune_after && states.len() > 1 {
@@ -266,6 +277,9 @@ pub fn solve_on(
                     s.stop = Some(Stop::Pruned);
                 }
             }
+        }
+        if o.merge_tolerance > 0.0 {
+            merge_close_starts(&mut states, sets, o.merge_tolerance, &mut merged_into);
         }
         let active: Vec<usize> = (0..states.len())
             .filter(|&i| states[i].stop.is_none())
@@ -402,7 +416,7 @@ pub fn solve_on(
             states[i].stop = Some(Stop::NoProgress);
         }
     }
-    Ok(states
+    let mut solutions: Vec<Solution> = states
         .into_iter()
         .map(|s| Solution {
             candidate: s.c,
@@ -412,5 +426,63 @@ pub fn solve_on(
             stop: s.stop.unwrap_or(Stop::IterationCap),
             log: s.log,
         })
-        .collect())
+        .collect();
+    for i in 0..solutions.len() {
+        // a start may have met one that met another later: follow to the one that ran on
+        let mut j = i;
+        while let Some(k) = merged_into[j] {
+            j = k;
+        }
+        if j != i {
+            let survivor = &solutions[j];
+            let (candidate, cost, count) = (survivor.candidate, survivor.cost, survivor.count);
+            let s = &mut solutions[i];
+            (s.candidate, s.cost, s.count) = (candidate, cost, count);
+        }
+    }
+    Ok(solutions)
+}
+
+/// Stops every running start that has come within `tolerance` of another running start
+/// of its point set and box with a lower cost, recording which one in `merged_into`
+/// (see [`SolverOptions::merge_tolerance`]).
+fn merge_close_starts(
+    states: &mut [State],
+    sets: &[usize],
+    tolerance: f64,
+    merged_into: &mut [Option<usize>],
+) {
+    let close = |a: &State, b: &State| {
+        let (x, y) = (a.c.shape.to_array(), b.c.shape.to_array());
+        let shape = x.iter().zip(y).all(|(x, y)| (x - y).abs() <= tolerance);
+        let translation = (a.c.pose.translation - b.c.pose.translation)
+            .abs()
+            .max_element();
+        let angle = 2.0
+            * a.c
+                .pose
+                .rotation
+                .dot(b.c.pose.rotation)
+                .abs()
+                .min(1.0)
+                .acos();
+        shape && translation <= tolerance && angle <= tolerance && a.bounds == b.bounds
+    };
+    for i in 0..states.len() {
+        if states[i].stop.is_some() {
+            continue;
+        }
+        for j in 0..states.len() {
+            if j == i || sets[j] != sets[i] || states[j].stop.is_some() {
+                continue;
+            }
+            // the higher cost gives way (ties: the later start)
+            let (ci, cj) = (states[i].normal.cost, states[j].normal.cost);
+            if (ci > cj || (ci == cj && i > j)) && close(&states[i], &states[j]) {
+                states[i].stop = Some(Stop::Merged);
+                merged_into[i] = Some(j);
+                break;
+            }
+        }
+    }
 }
