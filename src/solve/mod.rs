@@ -458,14 +458,7 @@ fn merge_close_starts(
         let translation = (a.c.pose.translation - b.c.pose.translation)
             .abs()
             .max_element();
-        let angle = 2.0
-            * a.c
-                .pose
-                .rotation
-                .dot(b.c.pose.rotation)
-                .abs()
-                .min(1.0)
-                .acos();
+        let angle = a.c.pose.rotation.angle_between(b.c.pose.rotation);
         shape && translation <= tolerance && angle <= tolerance && a.bounds == b.bounds
     };
     for i in 0..states.len() {
