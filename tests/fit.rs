@@ -517,10 +517,17 @@ fn suite_cases_from(first_seed: u64, keep: impl Fn(bool, f64, f64) -> bool) -> V
         .filter_map(|i| {
             let (partial, noise, outliers) = category(i);
             let seed = first_seed + i as u64;
-            keep(partial, noise, outliers)
-                .then(|| (seed, make_case(seed, partial, noise, outliers)))
+            keep(partial, noise, outliers).then(|| (seed, suite_case(first_seed, seed)))
         })
         .collect()
+}
+
+/// The suite's case `seed` of the seed set that starts at `first_seed` (its category
+/// follows from its place in the set).
+fn suite_case(first_seed: u64, seed: u64) -> Case {
+    let (partial, noise, outliers) =
+        supertoroid::bench::synthetic::category((seed - first_seed) as usize);
+    make_case(seed, partial, noise, outliers)
 }
 
 /// The default options for a suite case seen from its camera, the noise model on or off.
@@ -893,11 +900,9 @@ fn ninety_percent_of_the_suite_ci_subset() {
 /// are recovered thoroughly (on the suite: 508 -> 514 of 540).
 #[test]
 fn the_thorough_search_recovers_noisy_single_views() {
-    use supertoroid::bench::synthetic::category;
     let mut evaluator = CpuEvaluator::new();
     for seed in [10_050u64, 10_154] {
-        let (partial, noise, outliers) = category((seed - 10_000) as usize);
-        let case = make_case(seed, partial, noise, outliers);
+        let case = suite_case(10_000, seed);
         let options = |thorough| FitOptions {
             thorough,
             ..view_options(seed, &case, true)
@@ -919,11 +924,9 @@ fn the_thorough_search_recovers_noisy_single_views() {
 /// [`starts::turned_dual`]: supertoroid::fit::starts::turned_dual
 #[test]
 fn the_other_reading_of_the_top_view_is_tried() {
-    use supertoroid::bench::synthetic::category;
     let mut evaluator = CpuEvaluator::new();
     for seed in [20_016u64, 20_053] {
-        let (partial, noise, outliers) = category((seed - 20_000) as usize);
-        let case = make_case(seed, partial, noise, outliers);
+        let case = suite_case(20_000, seed);
         let (ok, report) = recovers(&mut evaluator, &case, &view_options(seed, &case, true));
         assert!(
             ok,
@@ -941,12 +944,14 @@ fn the_other_reading_of_the_top_view_is_tried() {
 /// clouds being noise-free, the median distance must be at the rounding level.
 #[test]
 fn a_fit_turned_about_its_hole_axis_is_tried() {
-    use supertoroid::bench::synthetic::category;
     let mut evaluator = CpuEvaluator::new();
     for seed in [20_135u64, 20_162] {
-        let (partial, noise, outliers) = category((seed - 20_000) as usize);
-        assert_eq!((noise, outliers), (0.0, 0.0), "case {seed} is noise-free");
-        let case = make_case(seed, partial, noise, outliers);
+        let case = suite_case(20_000, seed);
+        assert_eq!(
+            (case.noise, case.outlier_fraction),
+            (0.0, 0.0),
+            "case {seed} is noise-free"
+        );
         let (ok, report) = recovers(&mut evaluator, &case, &view_options(seed, &case, true));
         assert!(
             ok,
