@@ -540,6 +540,19 @@ fn view_options(seed: u64, case: &Case, noise_model: bool) -> FitOptions {
     }
 }
 
+/// Fits the suite's case `seed` (of the set from `first_seed`) with the default options
+/// seen from its camera and asserts that it is recovered; the case and the fit.
+fn assert_recovered(evaluator: &mut CpuEvaluator, first_seed: u64, seed: u64) -> (Case, FitReport) {
+    let case = suite_case(first_seed, seed);
+    let (ok, report) = recovers(evaluator, &case, &view_options(seed, &case, true));
+    assert!(
+        ok,
+        "case {seed}: {:?} against {:?}",
+        report.fitted.0, case.shape
+    );
+    (case, report)
+}
+
 /// Whether the fit with `options` recovers the case (the suite's rule), and the fit.
 fn recovers(evaluator: &mut CpuEvaluator, case: &Case, options: &FitOptions) -> (bool, FitReport) {
     let report = fit(evaluator, &case.points, options).unwrap();
@@ -928,13 +941,7 @@ fn the_thorough_search_recovers_noisy_single_views() {
 fn the_other_reading_of_the_top_view_is_tried() {
     let mut evaluator = CpuEvaluator::new();
     for seed in [20_016u64, 20_053] {
-        let case = suite_case(20_000, seed);
-        let (ok, report) = recovers(&mut evaluator, &case, &view_options(seed, &case, true));
-        assert!(
-            ok,
-            "case {seed}: {:?} against {:?}",
-            report.fitted.0, case.shape
-        );
+        assert_recovered(&mut evaluator, 20_000, seed);
     }
 }
 
@@ -948,17 +955,11 @@ fn the_other_reading_of_the_top_view_is_tried() {
 fn a_fit_turned_about_its_hole_axis_is_tried() {
     let mut evaluator = CpuEvaluator::new();
     for seed in [20_135u64, 20_162] {
-        let case = suite_case(20_000, seed);
+        let (case, report) = assert_recovered(&mut evaluator, 20_000, seed);
         assert_eq!(
             (case.noise, case.outlier_fraction),
             (0.0, 0.0),
             "case {seed} is noise-free"
-        );
-        let (ok, report) = recovers(&mut evaluator, &case, &view_options(seed, &case, true));
-        assert!(
-            ok,
-            "case {seed}: {:?} against {:?}",
-            report.fitted.0, case.shape
         );
         assert!(
             report.quality.median_distance < 1e-6 * report.shape.size(),
@@ -978,15 +979,9 @@ fn a_fit_turned_about_its_hole_axis_is_tried() {
 fn the_noise_model_grid_is_fine_enough_for_one_percent_noise() {
     let mut evaluator = CpuEvaluator::new();
     for (first_seed, seed) in [(10_000u64, 10_070u64), (10_000, 10_154), (20_000, 20_139)] {
-        let case = suite_case(first_seed, seed);
+        let (case, _) = assert_recovered(&mut evaluator, first_seed, seed);
         assert_eq!(case.noise, 0.01, "case {seed} has 1% noise");
         assert!(case.partial, "case {seed} is a single view");
-        let (ok, report) = recovers(&mut evaluator, &case, &view_options(seed, &case, true));
-        assert!(
-            ok,
-            "case {seed}: {:?} against {:?}",
-            report.fitted.0, case.shape
-        );
     }
 }
 
