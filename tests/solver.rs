@@ -225,7 +225,7 @@ fn starts_that_meet_run_on_as_one() {
         start([0.07, 2.1, 1.0, 1.0, 1.0, 1.0]),
     ];
     let sets = [0, 0, 1];
-    let mut run = |o: &SolverOptions| {
+    let run = |o: &SolverOptions| {
         let mut mock = Mock {
             residuals: rosenbrock,
             seen: Vec::new(),
