@@ -38,7 +38,8 @@ fn main() {
         let norm = Normalization::of(&case.points);
         let mut points = norm.points(&case.points);
         if on_sample {
-            // the fit's stage-2 sample: drawn after the 150 of stage 1 from the case's seed
+            // the fit's stage-2 sample, drawn as `fit::prepare` draws it (after the 150
+            // of stage 1, from the case's seed); a change there must be made here too
             let mut rng = synth::rng(case_seed);
             let _stage1 = synth::subsample(&points, options.stage1_points, &mut rng);
             points = synth::subsample(&points, options.stage2_points, &mut rng);
