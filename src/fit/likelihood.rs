@@ -17,8 +17,8 @@
 //! Seen from a viewpoint (a single view), the points cover only what the sensor saw, at a
 //! density of cos(incidence) / range² per unit area: dA above becomes that density times
 //! dA over the visible surface (a z-buffer of the grid's mesh, [`visibility`], found once
-//! per evaluation and held for its derivatives). Without it the model would shrink the unseen side to raise
-//! the density on the seen one.
+//! per evaluation and held for its derivatives). Without it the model would shrink the
+//! unseen side to raise the density on the seen one.
 //!
 //! The surface integral is a sum over a polar grid of the surface (cells at most
 //! [`CELL_SIGMAS`] sigmas across, where a Gaussian kernel's sum equals its integral to a
