@@ -253,11 +253,16 @@ fn visibility(
             (depth > 1e-9).then(|| (q.dot(right) / depth, q.dot(up) / depth, depth))
         })
         .collect();
-    let facing: Vec<bool> = cells
+    // each cell's incidence cosine, positive where it faces the sensor (outward normals)
+    let incidence: Vec<f64> = cells
         .iter()
         .zip(normals)
-        .map(|(cell, normal)| normal.dot(*cell - viewpoint) < 0.0)
+        .map(|(cell, normal)| {
+            let q = *cell - viewpoint;
+            -normal.dot(q) / q.length().max(1e-300)
+        })
         .collect();
+    let facing: Vec<bool> = incidence.iter().map(|&cos| cos > 0.0).collect();
     let (mut lo, mut hi) = (
         (f64::INFINITY, f64::INFINITY),
         (f64::NEG_INFINITY, f64::NEG_INFINITY),
@@ -368,8 +373,7 @@ fn visibility(
             }
             // the depth the cell's own surface spans from its centre to a pixel's
             // centre: a pixel's diagonal times tan(incidence), the cosine floored at 0.1
-            let r = (cells[j] - viewpoint).length();
-            let cos = (-normals[j].dot(cells[j] - viewpoint) / r).max(0.1);
+            let cos = incidence[j].max(0.1);
             let slope = std::f64::consts::SQRT_2 * pixel * depth * (1.0 - cos * cos).sqrt() / cos;
             depth <= 1.0 / nearest[k] as f64 + 0.25 * spacing + slope
         })
