@@ -591,6 +591,41 @@ fn the_robust_refinement_shakes_off_outliers_on_one_sided_views() {
     assert!(with >= without + 3, "refinement {with} vs none {without}");
 }
 
+/// A noise-free single view with outliers is fitted to rounding, not to a few per cent:
+/// the Cauchy refinement shrinks its scale with the fit's residuals, and a fit still off
+/// the points by more than rounding is retried with other samples. On the suite's 20
+/// such clouds (seen from their cameras), the sizes must come out within 1e-3 of the
+/// truth on at least 17 (measured when written: 18; 4 with one refinement at one scale,
+/// and 10048 then failed the suite's tolerance at 25% off).
+#[test]
+fn noise_free_views_with_outliers_are_fitted_to_rounding() {
+    let mut evaluator = CpuEvaluator::new();
+    let cases = suite_cases(|partial, noise, outliers| partial && noise == 0.0 && outliers > 0.0);
+    let mut exact = Vec::new();
+    for (seed, case) in &cases {
+        let report = fit(
+            &mut evaluator,
+            &case.points,
+            &view_options(*seed, case, true),
+        )
+        .unwrap();
+        let e = compare(
+            (&case.shape, &case.pose),
+            (&report.fitted.0, &report.fitted.1),
+        );
+        if e.sizes < 1e-3 {
+            exact.push(*seed);
+        }
+    }
+    eprintln!("sizes within 1e-3 on {} of 20: {exact:?}", exact.len());
+    assert_eq!(cases.len(), 20);
+    assert!(
+        exact.len() >= 17,
+        "only {} of 20 fitted to rounding",
+        exact.len()
+    );
+}
+
 /// A depth sensor saw through the space in front of its points: told where the camera
 /// was, the fit keeps solid out of it. On the suite's 60 single-view clouds with noise
 /// <= 1% the fit with the viewpoint must recover more shapes than without it (measured
