@@ -153,7 +153,7 @@ fn bench_synthetic_and_scaling_write_every_field() {
             .sum::<u64>()
     };
     assert_eq!(total("by_noise_ratio"), 5);
-    assert_eq!(v["by_warning"].as_array().unwrap().len(), 6);
+    assert_eq!(v["by_warning"].as_array().unwrap().len(), 8);
     for c in cases {
         has(
             c,
@@ -172,6 +172,7 @@ fn bench_synthetic_and_scaling_write_every_field() {
                 "noise_ratio",
                 "noise_warning",
                 "coverage_warning",
+                "misfit_warning",
                 "attainable",
             ],
         );

@@ -41,6 +41,8 @@ pub struct Case {
     /// whether it carried the unseen-surface warning (`fit::coverage`, single views
     /// with the viewpoint only)
     pub coverage_warning: bool,
+    /// whether it carried the warning of a fit off a precise cloud (`fit::PRECISE_MISFIT_WARNING`)
+    pub misfit_warning: bool,
     /// the share of an efficient estimator's fits of this cloud within the tolerances
     /// (`fit::attainable`: the Cramér-Rao bound of its inliers); NaN where it has none
     pub attainable: f64,
@@ -202,6 +204,10 @@ pub fn run(
             noise_ratio: noise * case.shape.size() / case.shape.thinnest_half_axis(),
             noise_warning: report.warnings.iter().any(|w| w.starts_with("noisy")),
             coverage_warning: report.warnings.iter().any(|w| w.starts_with("unseen")),
+            misfit_warning: report
+                .warnings
+                .iter()
+                .any(|w| w.starts_with("off a precise")),
             attainable: attainable::suite_case(&case, case_seed).unwrap_or(f64::NAN),
         });
         bar.inc(1);
@@ -282,11 +288,14 @@ fn bands(cases: &[Case]) -> (Vec<Band>, Vec<Band>) {
             low = high;
         }
         by_warning.push(band(partial, "no warning".into(), &|c| {
-            !c.noise_warning && !c.coverage_warning
+            !c.noise_warning && !c.coverage_warning && !c.misfit_warning
         }));
         by_warning.push(band(partial, "noisy".into(), &|c| c.noise_warning));
         by_warning.push(band(partial, "unseen surface".into(), &|c| {
             c.coverage_warning
+        }));
+        by_warning.push(band(partial, "off a precise cloud".into(), &|c| {
+            c.misfit_warning
         }));
     }
     (by_ratio, by_warning)
@@ -299,11 +308,11 @@ impl Report for SyntheticReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,noise_warning,coverage_warning,attainable\n",
+            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,noise_warning,coverage_warning,attainable,misfit_warning\n",
         );
         for c in &self.cases {
             s += &format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 c.seed,
                 c.partial,
                 c.noise,
@@ -318,7 +327,8 @@ impl Report for SyntheticReport {
                 c.noise_ratio,
                 c.noise_warning,
                 c.coverage_warning,
-                c.attainable
+                c.attainable,
+                c.misfit_warning
             );
         }
         s

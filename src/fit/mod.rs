@@ -38,10 +38,10 @@ mod report;
 pub mod starts;
 
 pub use report::{
-    BackendOut, FitReport, Iterations, NOISE_MODEL_WARNING_RATIO, NOISE_WARNING_RATIO, PointsOut,
-    PoseOut, Quality, Timing, parse_report_json, quality,
+    BackendOut, FitReport, Iterations, NOISE_MODEL_WARNING_RATIO, NOISE_WARNING_RATIO,
+    PRECISE_MISFIT_WARNING, PointsOut, PoseOut, Quality, Timing, parse_report_json, quality,
 };
-use report::{coverage_warning, noise_warning};
+use report::{coverage_warning, misfit_warning, noise_warning};
 
 use crate::eval::{Candidate, EvalError, Evaluator, Loss, Normalization, PointSet};
 use crate::model::{Pose, Shape};
@@ -544,7 +544,7 @@ fn retry_unseen_surfaces(
 /// The retries recover 10048 and bring the noise-free single views' median fit time
 /// from 24 to 22 ms (without the rounds, 62: one scale left most of these fits between
 /// 1e-5 and 1e-4, and every one was retried).
-const PRECISE_MISFIT: std::ops::Range<f64> = 1e-5..3e-3;
+pub const PRECISE_MISFIT: std::ops::Range<f64> = 1e-5..3e-3;
 
 fn precise_but_off(r: &FitReport) -> bool {
     PRECISE_MISFIT.contains(&(r.quality.median_distance / r.fitted.0.size()))
@@ -1633,6 +1633,7 @@ fn report(
     )
     .into_iter()
     .chain(coverage_warning(&quality))
+    .chain(misfit_warning(&shape, &quality))
     .collect();
     let r = pose.matrix();
     let q = pose.rotation;
