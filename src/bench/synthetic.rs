@@ -107,7 +107,7 @@ pub struct SyntheticReport {
     /// success by the true noise ratio (noise sigma / smallest half-axis)
     pub by_noise_ratio: Vec<Band>,
     /// success of the fits without a warning, with the noise warning, with the
-    /// unseen-surface warning (a fit can carry both)
+    /// unseen-surface warning, the off-a-precise-cloud warning (a fit can carry several)
     pub by_warning: Vec<Band>,
     /// pictures of failed cases (paths relative to the report)
     pub pictures: Vec<String>,
@@ -409,7 +409,7 @@ impl Report for SyntheticReport {
                 100.0 * c.attainable_rate
             );
         }
-        md += "\nBy the noise against the shape: the true noise sigma over the true shape's smallest half-axis (min of a1, a2, a3), and by the fit's warnings: `noisy` (its own estimate of the same ratio at or above `fit::NOISE_WARNING_RATIO`) and `unseen surface` (with the viewpoint, less than `fit::coverage::MIN_VISIBLE_COVERAGE` of the fitted surface facing it has points on it); a fit can carry both:\n\n| cloud | band | cases | success |\n|---|---|---:|---:|\n";
+        md += "\nBy the noise against the shape: the true noise sigma over the true shape's smallest half-axis (min of a1, a2, a3), and by the fit's warnings: `noisy` (its own estimate of the same ratio at or above `fit::NOISE_WARNING_RATIO`) and `unseen surface` (with the viewpoint, less than `fit::coverage::MIN_VISIBLE_COVERAGE` of the fitted surface facing it has points on it) and `off a precise cloud` (a median distance between rounding and `fit::PRECISE_MISFIT_WARNING` of the size); a fit can carry several:\n\n| cloud | band | cases | success |\n|---|---|---:|---:|\n";
         for b in self.by_noise_ratio.iter().chain(&self.by_warning) {
             md += &format!(
                 "| {} | {} | {} | {}/{} ({:.0}%) |\n",

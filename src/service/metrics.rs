@@ -93,7 +93,8 @@ impl Metrics {
         registry.register(
             "fit_warnings",
             "Fits that carried a warning, by kind (noisy_for_this_shape, unseen_surface, \
-             viewpoint_ignored): a rising rate is a sensor or set-up to look at",
+             viewpoint_ignored, off_a_precise_cloud): a rising rate is a sensor or set-up to \
+             look at",
             warnings.clone(),
         );
         Self {
