@@ -1132,6 +1132,12 @@ fn spin_about_axis(
     Ok(())
 }
 
+/// The most rounds of [`refine_robustly`], each at a smaller Cauchy scale.
+const ROBUST_ROUNDS: usize = 4;
+/// A round whose residuals' scale came out below this share of the scale it ran at is
+/// followed by another.
+const ROBUST_SHRINK: f64 = 0.5;
+
 /// The end of stage 2: each cloud's chosen solution solved again under a Cauchy loss
 /// whose scale is `refine_scale` robust residual scales (sigma = 1.4826 · median |r| of
 /// the stage-2 sample at the solution). The Huber loss of the stages still lets
@@ -1150,11 +1156,6 @@ fn spin_about_axis(
 /// The point sets are the stage-2 samples (still uploaded). Each cloud has its own loss
 /// scale, so each is solved in its own call; the refined solution keeps the box of
 /// [`Prepared::supported_bounds`], and its iterations count as stage 2's.
-const ROBUST_ROUNDS: usize = 4;
-/// A round whose residuals' scale came out below this share of the scale it ran at is
-/// followed by another.
-const ROBUST_SHRINK: f64 = 0.5;
-
 fn refine_robustly(
     evaluator: &mut dyn Evaluator,
     group: &[(usize, Prepared)],
