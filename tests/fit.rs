@@ -593,10 +593,11 @@ fn the_robust_refinement_shakes_off_outliers_on_one_sided_views() {
 
 /// A noise-free single view with outliers is fitted to rounding, not to a few per cent:
 /// the Cauchy refinement shrinks its scale with the fit's residuals, and a fit still off
-/// the points by more than rounding is retried with other samples. On the suite's 20
-/// such clouds (seen from their cameras), the sizes must come out within 1e-3 of the
-/// truth on at least 17 (measured when written: 18; 4 with one refinement at one scale,
-/// and 10048 then failed the suite's tolerance at 25% off).
+/// the points by more than rounding is retried with other samples (up to 16). On the
+/// suite's 20 such clouds (seen from their cameras), the sizes must come out within 1e-3
+/// of the truth on at least 18 (measured when written: 18 with 3 retries, 19 with up to
+/// 16; 4 with one refinement at one scale, and 10048 then failed the suite's tolerance
+/// at 25% off).
 #[test]
 fn noise_free_views_with_outliers_are_fitted_to_rounding() {
     let mut evaluator = CpuEvaluator::new();
@@ -625,18 +626,31 @@ fn noise_free_views_with_outliers_are_fitted_to_rounding() {
     eprintln!("sizes within 1e-3 on {} of 20: {exact:?}", exact.len());
     assert_eq!(cases.len(), 20);
     assert!(
-        exact.len() >= 17,
+        exact.len() >= 18,
         "only {} of 20 fitted to rounding",
         exact.len()
     );
-    // a view whose retries stay in a wrong basin (measured: sizes 14% off) says so
+    // 30123 leaves its first three retries in a wrong basin (sizes 14% off): the further
+    // retries find the right one; without retries the fit stays off and says so
     let case = suite_case(30000, 30123);
-    let (recovered, report) = recovers(&mut evaluator, &case, &view_options(30123, &case, true));
+    let options = view_options(30123, &case, true);
+    let (recovered, report) = recovers(&mut evaluator, &case, &options);
     assert!(
-        recovered || warned_off_precise(&report),
-        "30123 is neither recovered nor warned: {:?} against {:?}",
+        recovered && !warned_off_precise(&report),
+        "30123: {:?} against {:?}, {:?}",
         report.fitted.0,
-        case.shape
+        case.shape,
+        report.warnings
+    );
+    let without_retries = FitOptions {
+        unseen_surface_retries: 0,
+        ..options
+    };
+    let (recovered, report) = recovers(&mut evaluator, &case, &without_retries);
+    assert!(
+        !recovered && warned_off_precise(&report),
+        "30123 without retries: recovered {recovered}, warnings {:?}",
+        report.warnings
     );
 }
 

@@ -48,6 +48,7 @@ use crate::model::{Pose, Shape};
 use crate::solve::{Bounds, Solution, SolverOptions, Stop, solve_on};
 use crate::synth;
 use glam::{DMat3, DQuat, DVec3};
+use std::ops::RangeInclusive;
 use std::time::Instant;
 
 /// The a4 reward of the paper's procedure (its stage-2 term for a wider hole).
@@ -379,6 +380,7 @@ pub fn fit_batch(
     let mut results = fit_batch_once(evaluator, clouds)?;
     refit_without_inconsistent_viewpoints(evaluator, clouds, &mut results)?;
     retry_unseen_surfaces(evaluator, clouds, &mut results)?;
+    retry_precise_misfits(evaluator, clouds, &mut results)?;
     Ok(results)
 }
 
@@ -435,13 +437,14 @@ pub const MAX_UNSEEN_SURFACE_RETRIES: u64 = 16;
 /// surface: covered, but often still in the wrong basin (the retries following it too:
 /// 449 -> 452 of the suite's 540), and for a fit that stays off a precise cloud by more
 /// than rounding ([`precise_but_off`]). Such a cloud is fitted again with
-/// `unseen_surface_retries` other seeds (one batch), and the covered fit, the first
-/// among them, with the lowest median distance to all points stands; for a single view
-/// noisy enough for the noise model, the most likely under the model
-/// ([`judged_by_likelihood`]; with [`FitOptions::thorough`] every such view is retried
-/// too); when none is covered,
-/// the noise model tries to rescue the first fit ([`rescue_unseen_surface`]), and failing
-/// that the first fit stands with its warning.
+/// `unseen_surface_retries` other seeds (one batch), and the fit that may stand
+/// ([`may_stand`]: covered, free space kept), the first among them, with the lowest
+/// median distance to all points stands; for a single view noisy enough for the noise
+/// model, the most likely under the model ([`judged_by_likelihood`]; with
+/// [`FitOptions::thorough`] every such view is retried too); when none may stand, the
+/// noise model tries to rescue the first fit ([`rescue_unseen_surface`]), and failing
+/// that the first fit stands with its warning. A fit still off a precise cloud goes on
+/// to [`retry_precise_misfits`].
 fn retry_unseen_surfaces(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
@@ -467,46 +470,24 @@ fn retry_unseen_surfaces(
     if uncovered.is_empty() {
         return Ok(());
     }
-    let options: Vec<(usize, FitOptions)> = uncovered
+    let listed: Vec<(usize, RangeInclusive<u64>)> = uncovered
         .iter()
-        .flat_map(|&i| {
-            (1..=clouds[i].1.unseen_surface_retries).map(move |k| {
-                (
-                    i,
-                    FitOptions {
-                        seed: clouds[i]
-                            .1
-                            .seed
-                            .wrapping_add(k.wrapping_mul(0x9E37_79B9_7F4A_7C15)),
-                        ..clouds[i].1.clone()
-                    },
-                )
-            })
-        })
+        .map(|&i| (i, 1..=clouds[i].1.unseen_surface_retries))
         .collect();
-    let batch: Vec<(&[DVec3], &FitOptions)> =
-        options.iter().map(|(i, o)| (clouds[*i].0, o)).collect();
     let retry_start = Instant::now();
-    let retries = fit_batch_once(evaluator, &batch)?;
+    let retries = fit_retries(evaluator, clouds, &listed)?;
     for &i in &uncovered {
         let first = results[i].as_ref().expect("uncovered fits are fits");
         let spent: f64 = first.timing_ms.total;
         let (cloud, cloud_options) = clouds[i];
         let common = judged_by_likelihood(cloud_options, first)
             .then(|| CommonSample::new(cloud, cloud_options));
-        let best = options
+        let best = retries
             .iter()
-            .zip(&retries)
-            .filter(|((cloud, _), _)| *cloud == i)
+            .filter(|(cloud, _)| *cloud == i)
             .filter_map(|(_, r)| r.as_ref().ok())
             .chain(std::iter::once(first))
-            .filter(|r| {
-                r.quality
-                    .visible_coverage
-                    .is_some_and(|c| c >= coverage::MIN_VISIBLE_COVERAGE)
-                    && r.free_space_violation
-                        .is_none_or(|v| v <= free_space::MAX_VIOLATED_FRACTION)
-            })
+            .filter(|r| may_stand(r))
             .map(|r| {
                 // (a noise-free view is told by its distances; the model's premise is noise)
                 let merit = match &common {
@@ -529,6 +510,102 @@ fn retry_unseen_surfaces(
             // caller's wait
             best.timing_ms.total = spent + retry_start.elapsed().as_secs_f64() * 1e3;
             results[i] = Ok(best);
+        }
+    }
+    Ok(())
+}
+
+/// Fits each listed cloud again with the retry seeds of its range (one batch): the
+/// retries, each with the index of its cloud.
+fn fit_retries(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+    listed: &[(usize, RangeInclusive<u64>)],
+) -> Result<Vec<(usize, Result<FitReport, FitError>)>, FitError> {
+    let options: Vec<(usize, FitOptions)> = listed
+        .iter()
+        .flat_map(|(i, ks)| {
+            ks.clone().map(move |k| {
+                (
+                    *i,
+                    FitOptions {
+                        seed: clouds[*i]
+                            .1
+                            .seed
+                            .wrapping_add(k.wrapping_mul(0x9E37_79B9_7F4A_7C15)),
+                        ..clouds[*i].1.clone()
+                    },
+                )
+            })
+        })
+        .collect();
+    let batch: Vec<(&[DVec3], &FitOptions)> =
+        options.iter().map(|(i, o)| (clouds[*i].0, o)).collect();
+    let retries = fit_batch_once(evaluator, &batch)?;
+    Ok(options.into_iter().map(|(i, _)| i).zip(retries).collect())
+}
+
+/// A fit (first or retry) that may stand: with a viewpoint, the points cover its
+/// visible surface and it keeps out of the space the sensor saw through.
+fn may_stand(r: &FitReport) -> bool {
+    r.quality
+        .visible_coverage
+        .is_none_or(|c| c >= coverage::MIN_VISIBLE_COVERAGE)
+        && r.free_space_violation
+            .is_none_or(|v| v <= free_space::MAX_VIOLATED_FRACTION)
+}
+
+/// Retries in all, at most, of a fit that stays off a precise cloud
+/// ([`precise_but_off`]): where the first [`UNSEEN_SURFACE_RETRIES`] leave it there,
+/// [`retry_precise_misfits`] goes on up to this many. On the suite, 30051 and 30123 (sizes
+/// 240% and 14% off after 3 retries, still 146% and 14% after 8) were recovered to
+/// rounding by 16, each fit taking about 400 ms instead of 90.
+pub const PRECISE_MISFIT_RETRIES: u64 = 16;
+
+/// A fit still off a precise cloud after [`retry_unseen_surfaces`] is fitted again with
+/// the further seeds up to [`PRECISE_MISFIT_RETRIES`] (one batch), and the fit with the
+/// lowest median distance that may stand ([`may_stand`]) replaces it. Nothing is
+/// retried where the caller turned the retries off.
+fn retry_precise_misfits(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+    results: &mut [Result<FitReport, FitError>],
+) -> Result<(), FitError> {
+    let listed: Vec<(usize, RangeInclusive<u64>)> = results
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            let r = r.as_ref().ok()?;
+            let done = clouds[i].1.unseen_surface_retries;
+            (r.method == Method::Default
+                && done > 0
+                && done < PRECISE_MISFIT_RETRIES
+                && precise_but_off(r))
+            .then_some((i, done + 1..=PRECISE_MISFIT_RETRIES))
+        })
+        .collect();
+    if listed.is_empty() {
+        return Ok(());
+    }
+    let start = Instant::now();
+    let retries = fit_retries(evaluator, clouds, &listed)?;
+    for (i, _) in &listed {
+        let current = results[*i].as_ref().expect("listed fits are fits");
+        let best = retries
+            .iter()
+            .filter(|(cloud, _)| cloud == i)
+            .filter_map(|(_, r)| r.as_ref().ok())
+            .chain(std::iter::once(current))
+            .filter(|r| may_stand(r))
+            .min_by(|a, b| {
+                a.quality
+                    .median_distance
+                    .total_cmp(&b.quality.median_distance)
+            })
+            .cloned();
+        if let Some(mut best) = best {
+            best.timing_ms.total = current.timing_ms.total + start.elapsed().as_secs_f64() * 1e3;
+            results[*i] = Ok(best);
         }
     }
     Ok(())

@@ -153,10 +153,11 @@ pub(super) fn coverage_warning(quality: &Quality) -> Option<String> {
 /// rounding but under [`PRECISE_MISFIT_WARNING`] of the size, where a noise-free cloud
 /// (a CAD model's, a simulator's) fitted in the right basin leaves rounding (below 1e-6
 /// of the size on the suite's noise-free clouds) and a depth sensor's noise leaves far
-/// more. On the suite, the fits it warns are the two noise-free single views with
-/// outliers whose retries stayed in a wrong basin (30051, 30123: sizes 240% and 14% off);
-/// a real sensor with noise under about 0.15% of the object's size would be warned too,
-/// which the message says.
+/// more. With the retries of `fit` (up to [`super::PRECISE_MISFIT_RETRIES`]) no fit on
+/// the suite carries it; with 3 retries it warned the two noise-free single views left
+/// in a wrong basin (30051, 30123: sizes 240% and 14% off), and no right fit. A real
+/// sensor with noise under about 0.15% of the object's size would be warned too, which
+/// the message says.
 pub(super) fn misfit_warning(shape: &Shape, quality: &Quality) -> Option<String> {
     let relative = quality.median_distance / shape.size();
     (super::PRECISE_MISFIT.start..PRECISE_MISFIT_WARNING)
