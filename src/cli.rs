@@ -215,8 +215,9 @@ pub struct FitArgs {
     /// camera's own frame): the fit keeps solid out of the space the sensor saw through
     #[arg(long, allow_hyphen_values = true)]
     pub viewpoint: Option<String>,
-    /// with --viewpoint: other downsampling seeds to try when the fit leaves most of the
-    /// surface it shows the sensor without points (0 turns the retries off; at most 16)
+    /// other downsampling seeds to try when, with --viewpoint, the fit leaves most of the
+    /// surface it shows the sensor without points, or the fit stays off a precise cloud
+    /// (then up to 16 in all); 0 turns the retries off; at most 16
     #[arg(long, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=crate::fit::MAX_UNSEEN_SURFACE_RETRIES))]
     pub retries: u64,
     /// skip the noise model's polish of noisy fits and its rescue of uncovered single

@@ -167,9 +167,11 @@ pub struct FitOptions {
     /// in the camera's own frame). The space between it and every point is empty, so a
     /// candidate that puts solid there pays for it (see [`free_space`]).
     pub viewpoint: Option<DVec3>,
-    /// with a viewpoint: how many other downsampling seeds to try when the fit leaves most
-    /// of its visible surface without points (see `retry_unseen_surfaces` in this
-    /// module); 0 turns the retries off, the paper's method never retries
+    /// how many other downsampling seeds to try when, with a viewpoint, the fit leaves
+    /// most of its visible surface without points, or the fit stays off a precise cloud
+    /// (then up to [`PRECISE_MISFIT_RETRIES`] where these leave it there; see
+    /// `retry_unseen_surfaces` in this module); 0 turns the retries off, the paper's
+    /// method never retries
     pub unseen_surface_retries: u64,
     /// a fit whose noise is at least [`LIKELIHOOD_NOISE_RATIO`] of its thinnest half-axis
     /// ([`LIKELIHOOD_VIEW_NOISE_RATIO`] with a viewpoint) is polished to the

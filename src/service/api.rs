@@ -59,9 +59,10 @@ pub struct FitRequestOptions {
     #[param(value_type = Option<Vec<f64>>)]
     #[serde(default, deserialize_with = "viewpoint_from_array_or_text")]
     pub viewpoint: Option<[f64; 3]>,
-    /// with a viewpoint: other downsampling seeds to try when the fit leaves most of the
-    /// surface it shows the sensor without points (default 3, 0 turns them off, at most
-    /// 16); each retry costs about one fit, and only such fits are retried
+    /// other downsampling seeds to try when, with a viewpoint, the fit leaves most of the
+    /// surface it shows the sensor without points, or the fit stays off a precise cloud
+    /// (then up to 16 in all) (default 3, 0 turns them off, at most 16); each retry costs
+    /// about one fit, and only such fits are retried
     pub retries: Option<u64>,
     /// polish a noisy fit under a model of the noise, and rescue an uncovered single view
     /// with it (default true; false saves 20-100 ms on such clouds, and leaves the noise's
