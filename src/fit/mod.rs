@@ -484,23 +484,12 @@ fn retry_unseen_surfaces(
         let (cloud, cloud_options) = clouds[i];
         let common = judged_by_likelihood(cloud_options, first)
             .then(|| CommonSample::new(cloud, cloud_options));
-        let best = retries
-            .iter()
-            .filter(|(cloud, _)| *cloud == i)
-            .filter_map(|(_, r)| r.as_ref().ok())
-            .chain(std::iter::once(first))
-            .filter(|r| may_stand(r))
-            .map(|r| {
-                // (a noise-free view is told by its distances; the model's premise is noise)
-                let merit = match &common {
-                    Some(common) => common.negative_log_likelihood(r),
-                    None => r.quality.median_distance,
-                };
-                (merit, r)
-            })
-            .min_by(|a, b| a.0.total_cmp(&b.0))
-            .map(|(_, r)| r)
-            .cloned();
+        // (a noise-free view is told by its distances; the model's premise is noise)
+        let best = best_standing(&retries, i, first, |r| match &common {
+            Some(common) => common.negative_log_likelihood(r),
+            None => r.quality.median_distance,
+        })
+        .cloned();
         let best = best.or_else(|| {
             rescue_unseen_surface(evaluator, cloud, cloud_options, first).map(|mut r| {
                 r.timing_ms = first.timing_ms.clone();
@@ -557,12 +546,31 @@ fn may_stand(r: &FitReport) -> bool {
             .is_none_or(|v| v <= free_space::MAX_VIOLATED_FRACTION)
 }
 
+/// Of cloud `cloud`'s retries and its `current` fit (last), the one with the lowest
+/// `merit` among those that may stand ([`may_stand`]); the first of equals.
+fn best_standing<'a>(
+    retries: &'a [(usize, Result<FitReport, FitError>)],
+    cloud: usize,
+    current: &'a FitReport,
+    merit: impl Fn(&FitReport) -> f64,
+) -> Option<&'a FitReport> {
+    retries
+        .iter()
+        .filter(|(of, _)| *of == cloud)
+        .filter_map(|(_, r)| r.as_ref().ok())
+        .chain(std::iter::once(current))
+        .filter(|r| may_stand(r))
+        .map(|r| (merit(r), r))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, r)| r)
+}
+
 /// Retries in all, at most, of a fit that stays off a precise cloud
 /// ([`precise_but_off`]): where the first [`UNSEEN_SURFACE_RETRIES`] leave it there,
 /// [`retry_precise_misfits`] goes on up to this many. On the suite, 30051 and 30123 (sizes
 /// 240% and 14% off after 3 retries, still 146% and 14% after 8) were recovered to
 /// rounding by 16, each fit taking about 400 ms instead of 90.
-pub const PRECISE_MISFIT_RETRIES: u64 = 16;
+pub const PRECISE_MISFIT_RETRIES: u64 = MAX_UNSEEN_SURFACE_RETRIES;
 
 /// A fit still off a precise cloud after [`retry_unseen_surfaces`] is fitted again with
 /// the further seeds up to [`PRECISE_MISFIT_RETRIES`] (one batch), and the fit with the
@@ -593,18 +601,7 @@ fn retry_precise_misfits(
     let retries = fit_retries(evaluator, clouds, &listed)?;
     for (i, _) in &listed {
         let current = results[*i].as_ref().expect("listed fits are fits");
-        let best = retries
-            .iter()
-            .filter(|(cloud, _)| cloud == i)
-            .filter_map(|(_, r)| r.as_ref().ok())
-            .chain(std::iter::once(current))
-            .filter(|r| may_stand(r))
-            .min_by(|a, b| {
-                a.quality
-                    .median_distance
-                    .total_cmp(&b.quality.median_distance)
-            })
-            .cloned();
+        let best = best_standing(&retries, *i, current, |r| r.quality.median_distance).cloned();
         if let Some(mut best) = best {
             best.timing_ms.total = current.timing_ms.total + start.elapsed().as_secs_f64() * 1e3;
             results[*i] = Ok(best);
