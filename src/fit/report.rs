@@ -57,6 +57,10 @@ pub struct PointsOut {
     pub input: usize,
     pub stage1: usize,
     pub stage2: usize,
+    /// the points of the noise model's final polish, where it ran (see
+    /// [`super::FitOptions::polish_points`])
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub polish: Option<usize>,
 }
 
 /// The result of `supertoroid fit` (and of the service), documented in the README.
@@ -86,6 +90,13 @@ pub struct FitReport {
     /// surface; the retries must still see it)
     #[serde(skip)]
     pub uncovered_before_model: bool,
+    /// the noise model refined this fit ([`Quality::noise_sigma`] is then the model's)
+    #[serde(skip)]
+    pub noise_modelled: bool,
+    /// how much less likely the other reading of the top view was than this fit under
+    /// the noise model, on the sample it was fitted to; none where it was not tried
+    #[serde(skip)]
+    pub other_reading_gap: Option<f64>,
 }
 
 /// Noise ([`Quality::noise_sigma`]) above this fraction of the fitted shape's smallest
