@@ -663,32 +663,6 @@ fn the_noise_model_does_not_stop_at_one_small_step() {
     assert_recovered(&mut evaluator, 20000, 20175);
 }
 
-/// A noise-free single view whose fit leaves its points a few per mille of the size off
-/// (`fit::PRECISE_MISFIT`, up to 5e-3 since the eighteenth session; 1% noise leaves 7e-3
-/// and more) is retried: 60171 (held-out seed set 60000, no noise or outliers) finds no
-/// hole in its first fit (median distance 3.4e-3 of the size, above the old window's
-/// 3e-3) and is fitted to rounding by a retry.
-#[test]
-fn a_noise_free_view_a_few_per_mille_off_is_retried() {
-    let mut evaluator = CpuEvaluator::new();
-    let seed = 60_171u64;
-    let case = suite_case(60_000, seed);
-    assert_eq!((case.noise, case.outlier_fraction), (0.0, 0.0));
-    let options = |retries| FitOptions {
-        unseen_surface_retries: retries,
-        ..view_options(seed, &case, true)
-    };
-    let (once_ok, once) = recovers(&mut evaluator, &case, &options(0));
-    assert!(!once_ok, "{:?}", once.fitted);
-    let (retried_ok, retried) = recovers(&mut evaluator, &case, &options(3));
-    assert!(retried_ok, "{:?}", retried.fitted);
-    assert!(
-        retried.quality.median_distance < 1e-6 * retried.fitted.0.size(),
-        "{}",
-        retried.quality.median_distance
-    );
-}
-
 fn warned_off_precise(report: &FitReport) -> bool {
     report
         .warnings

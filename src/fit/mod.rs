@@ -716,12 +716,12 @@ fn polish_on_more_points(
 /// tolerance, 1.7e-3, was 9% off in size); the 1%-noise clouds leave 7e-3 and more.
 /// The retries recover 10048 and bring the noise-free single views' median fit time
 /// from 24 to 22 ms (without the rounds, 62: one scale left most of these fits between
-/// 1e-5 and 1e-4, and every one was retried). The window reached 3e-3 until the
-/// eighteenth session; on the held-out seed sets two noise-free views sat just above it
-/// (50087 in the other reading of its top view at 3.7e-3, 60171 without a hole at
-/// 3.4e-3), and up to 5e-3 their retries fit them to rounding: 1040 -> 1042 of the six
-/// seed sets' 1080 cases, nothing lost, no noisy fit's time changed.
-pub const PRECISE_MISFIT: std::ops::Range<f64> = 1e-5..5e-3;
+/// 1e-5 and 1e-4, and every one was retried). Not wider: up to 5e-3 the retries fitted
+/// two held-out noise-free views to rounding (50087 at 3.7e-3, 60171 at 3.4e-3; the six
+/// seed sets 1040 -> 1042 of 1080), but the paper's roll, a real scan, sits in that band:
+/// it was retried on every seed, 8 -> 150 ms a fit, and came out farther from its points
+/// (relative RMS 1.13 -> 1.25%).
+pub const PRECISE_MISFIT: std::ops::Range<f64> = 1e-5..3e-3;
 
 fn precise_but_off(r: &FitReport) -> bool {
     PRECISE_MISFIT.contains(&(r.quality.median_distance / r.fitted.0.size()))
