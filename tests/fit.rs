@@ -736,6 +736,45 @@ fn a_viewpoint_the_fit_contradicts_is_ignored_with_a_warning() {
     );
 }
 
+/// A fit in a wrong basin contradicts the right viewpoint too: before the viewpoint is
+/// ignored, the cloud is fitted again with it from other samples, and a retry that keeps
+/// its free space and lies as close to the points as the fit without it keeps the
+/// viewpoint. 60141 (held-out seed set 60000; no noise, 10% outliers) was refitted without
+/// its camera and ended 12 times too large; two of its three retries fit it to rounding.
+/// Without retries the viewpoint is still ignored, with its warning.
+#[test]
+fn a_contradicted_viewpoint_is_retried_before_it_is_ignored() {
+    let mut evaluator = CpuEvaluator::new();
+    let seed = 60_141u64;
+    let case = suite_case(60_000, seed);
+    let options = |retries| FitOptions {
+        unseen_surface_retries: retries,
+        ..view_options(seed, &case, true)
+    };
+    let (once_ok, once) = recovers(&mut evaluator, &case, &options(0));
+    assert!(!once_ok, "{:?}", once.fitted);
+    assert_eq!(viewpoint_warnings(&once).len(), 1, "{:?}", once.warnings);
+    let (retried_ok, retried) = recovers(&mut evaluator, &case, &options(3));
+    assert!(retried_ok, "{:?}", retried.fitted);
+    assert!(
+        viewpoint_warnings(&retried).is_empty(),
+        "{:?}",
+        retried.warnings
+    );
+    assert!(retried.quality.visible_coverage.is_some());
+}
+
+/// The robust refinement's later rounds (clouds that lie on their surface) run up to 60
+/// iterations, not 15: the held-out noise-free view 40138 (5% outliers) stopped at 15
+/// with its points 4e-5 of the size off and a4 14% long, and is recovered at 60.
+#[test]
+fn the_robust_refinement_finishes_a_slow_valley_on_a_precise_view() {
+    let mut evaluator = CpuEvaluator::new();
+    let (case, report) = assert_recovered(&mut evaluator, 40_000, 40_138);
+    assert_eq!(case.noise, 0.0);
+    assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+}
+
 fn viewpoint_warnings(report: &FitReport) -> Vec<&String> {
     report
         .warnings
