@@ -489,15 +489,7 @@ fn retry_unseen_surfaces(
         let first = results[i].as_ref().expect("uncovered fits are fits");
         let spent: f64 = first.timing_ms.total;
         let (cloud, cloud_options) = clouds[i];
-        let common = judged_by_likelihood(cloud_options, first)
-            .then(|| CommonSample::new(cloud, cloud_options));
-        // (a noise-free view is told by its distances; the model's premise is noise)
-        let best = best_standing(&retries, i, first, |r| match &common {
-            Some(common) => common.negative_log_likelihood(r),
-            None => r.quality.median_distance,
-        })
-        .cloned();
-        let best = best.or_else(|| {
+        let best = best_retry(&retries, i, first, clouds[i]).or_else(|| {
             rescue_unseen_surface(evaluator, cloud, cloud_options, first).map(|mut r| {
                 r.timing_ms = first.timing_ms.clone();
                 r
@@ -570,6 +562,25 @@ fn best_standing<'a>(
         .map(|r| (merit(r), r))
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|(_, r)| r)
+}
+
+/// Of cloud `i`'s retries and its `first` fit, the best that may stand
+/// ([`best_standing`]): for a single view noisy enough for the noise model
+/// ([`judged_by_likelihood`]) the most likely on a common sample ([`CommonSample`]),
+/// otherwise the one with the lowest median distance (a noise-free view is told by its
+/// distances; the model's premise is noise).
+fn best_retry(
+    retries: &[(usize, Result<FitReport, FitError>)],
+    i: usize,
+    first: &FitReport,
+    (cloud, options): (&[DVec3], &FitOptions),
+) -> Option<FitReport> {
+    let common = judged_by_likelihood(options, first).then(|| CommonSample::new(cloud, options));
+    best_standing(retries, i, first, |r| match &common {
+        Some(common) => common.negative_log_likelihood(r),
+        None => r.quality.median_distance,
+    })
+    .cloned()
 }
 
 /// Retries in all, at most, of a fit that stays off a precise cloud
@@ -837,14 +848,7 @@ fn refit_without_inconsistent_viewpoints(
         .iter()
         .map(|&(i, _)| {
             let first = results[i].as_ref().expect("contradicted fits are fits");
-            let (cloud, cloud_options) = clouds[i];
-            let common = judged_by_likelihood(cloud_options, first)
-                .then(|| CommonSample::new(cloud, cloud_options));
-            best_standing(&retries, i, first, |r| match &common {
-                Some(common) => common.negative_log_likelihood(r),
-                None => r.quality.median_distance,
-            })
-            .cloned()
+            best_retry(&retries, i, first, clouds[i])
         })
         .collect();
     let options: Vec<FitOptions> = contradicted
