@@ -1128,6 +1128,21 @@ fn the_other_reading_of_the_top_view_is_tried() {
     }
 }
 
+/// On a full cloud the likelier reading of the top view wins outright
+/// (`fit::COVERED_DUAL_READING_MARGIN` 0, against the margin single views need): 90091
+/// (1% noise) and 80113 (2% noise, 5% outliers), diamond-ish tops (eps2 1.72 and 1.55),
+/// were fitted square-ish (eps2 0.36 and 0.43) with the right reading less than the
+/// single views' margin more likely; both are recovered now.
+#[test]
+fn a_full_cloud_takes_the_likelier_reading_of_its_top_view() {
+    let mut evaluator = CpuEvaluator::new();
+    for (first_seed, seed) in [(90_000u64, 90_091u64), (80_000, 80_113)] {
+        let (case, report) = assert_recovered(&mut evaluator, first_seed, seed);
+        assert!(!case.partial && case.noise > 0.0, "case {seed}");
+        assert!(report.shape.eps2 > 1.25, "{:?}", report.shape);
+    }
+}
+
 /// Stage 1's best fit turned about its hole axis (`fit::spin_about_axis`): two noise-free
 /// clouds of the suite, a single view (20135) and a full cloud (20162), whose lopsided top
 /// views least squares settled in a basin turned about the right axis (20162's fit left
