@@ -531,16 +531,18 @@ fn retry_unseen_surfaces(
     Ok(())
 }
 
-/// A single view's fit without a hole (a4 < 1) may be a ring seen edge-on whose hole
-/// axis the starts missed: the normal lines of its visible band meet the tube's tangent
-/// about as well as the hole axis ([`starts::across_line_of_sight`]). On the suite's single views
-/// (six seed sets, 540 cases) the normal lines' axis was more than 20 degrees off the
-/// hole axis on 137, most of which the other starts still recovered; the five failures
-/// without a hole (40013, 40099, 60017, 10089, 20014) were all seen within 12 degrees of
-/// edge-on. Such a fit is fitted again from the hole axes across the line of sight alone,
-/// and the refit replaces it where it is better by [`best_retry`]'s measure and may
-/// stand. (Those starts among the usual ones won stage 1 on other views with giant rings
-/// through the visible patch: the six sets lost 9 cases net.)
+/// A single view's fit without an open hole ([`OPEN_HOLE`]) may be a ring seen edge-on
+/// whose hole axis the starts missed: the normal lines of its visible band meet the
+/// tube's tangent about as well as the hole axis ([`starts::across_line_of_sight`]). On
+/// the suite's single views (six seed sets, 540 cases) the normal lines' axis was more
+/// than 20 degrees off the hole axis on 137, most of which the other starts still
+/// recovered; the five failures without a hole (10089, 20014, 40013, 40099, 60017) were
+/// all seen within 12 degrees of edge-on. Such a fit is fitted again from the hole axes
+/// across the line of sight alone, and the refit replaces it where it may stand and is
+/// better by [`best_retry`]'s measure: 10089, 40013, 40099, 60017 and 60171 recovered,
+/// none lost (20014's refit is near the truth but leaves 26% of its visible surface
+/// without points). Those starts among the usual ones won stage 1 on other views with
+/// giant rings through the visible patch (the six sets lost 9 cases net).
 fn retry_across_line_of_sight(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
