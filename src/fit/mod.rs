@@ -425,11 +425,8 @@ fn fit_batch_from(
         (0..clouds.len()).map(|_| None).collect();
     let mut prepared: Vec<(usize, Prepared)> = Vec::new();
     for (i, (points, o)) in clouds.iter().enumerate() {
-        match prepare(points, o) {
-            Ok(mut p) => {
-                if start_set == StartSet::AcrossLineOfSight {
-                    p.starts = std::mem::take(&mut p.across_starts);
-                }
+        match prepare(points, o, start_set) {
+            Ok(p) => {
                 if !p.starts.is_empty() {
                     prepared.push((i, p));
                 }
@@ -756,7 +753,7 @@ fn polish_on_more_points(
             stage2_points: options.polish_points,
             ..(*options).clone()
         };
-        let Ok(p) = prepare(cloud, &polish_options) else {
+        let Ok(p) = prepare(cloud, &polish_options, StartSet::Usual) else {
             continue;
         };
         let c = p.norm.candidate(&fitted.fitted.0, &fitted.fitted.1);
@@ -989,10 +986,9 @@ struct Prepared<'a> {
     /// free-space points of each stage (empty without a viewpoint)
     stage1_free: Vec<DVec3>,
     stage2_free: Vec<DVec3>,
+    /// stage 1's starts, of the [`StartSet`] asked for (the hole axes across the line of
+    /// sight: none unless a viewpoint is given and the normal lines' axis is across it)
     starts: Vec<Candidate>,
-    /// the starts of [`retry_across_line_of_sight`] (empty unless a viewpoint is given
-    /// and the normal lines' axis is across the line of sight)
-    across_starts: Vec<Candidate>,
     bounds: Bounds,
     opts1: SolverOptions,
     opts2: SolverOptions,
@@ -1012,7 +1008,11 @@ struct Prepared<'a> {
     known_axis: bool,
 }
 
-fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitError> {
+fn prepare<'a>(
+    points: &'a [DVec3],
+    o: &FitOptions,
+    start_set: StartSet,
+) -> Result<Prepared<'a>, FitError> {
     if !(o.refine_scale.is_finite() && o.refine_scale >= 0.0) {
         return Err(FitError::InvalidOption(format!(
             "refine scale must be finite and >= 0, got {}",
@@ -1104,7 +1104,7 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
             }
         }
         if let Some(across) = starts::across_line_of_sight(axis, o.viewpoint.map(|v| norm.point(v)))
-            .filter(|_| o.known_axis.is_none())
+            .filter(|_| start_set == StartSet::AcrossLineOfSight && o.known_axis.is_none())
             && let Some(on_across) =
                 starts::axis_point_for_direction(&axis_sample, &normals, across)
         {
@@ -1236,8 +1236,10 @@ fn prepare<'a>(points: &'a [DVec3], o: &FitOptions) -> Result<Prepared<'a>, FitE
         stage2_pts,
         stage1_free,
         stage2_free,
-        starts,
-        across_starts,
+        starts: match start_set {
+            StartSet::Usual => starts,
+            StartSet::AcrossLineOfSight => across_starts,
+        },
         bounds,
         opts1,
         opts2,
@@ -1753,7 +1755,7 @@ fn rescue_unseen_surface(
     }
     // (the first fit's preparation, sample and free-space points again: a few
     // milliseconds against the rescue's hundreds, and the first fit keeps none of it)
-    let p = prepare(points, options).ok()?;
+    let p = prepare(points, options, StartSet::Usual).ok()?;
     let viewpoint = p.viewpoint?;
     let fitted = p.norm.candidate(&first.fitted.0, &first.fitted.1);
     let mut starts = vec![fitted];
