@@ -654,6 +654,67 @@ fn noise_free_views_with_outliers_are_fitted_to_rounding() {
     );
 }
 
+/// A fit whose median distance is far above its points' own scatter about a smooth
+/// surface (`fit::scatter`, over `fit::MISFIT_OVER_SCATTER`) is in a wrong basin even
+/// where that distance is too large for a precise cloud: 100153 (noise-free, no
+/// outliers; a flat ring fitted with its sizes 21% off, 15 times its scatter) and 100051
+/// (noise-free, 10% outliers; an edge-on ring fitted as a closed body, 72 times) are
+/// fitted again with other seeds and recovered to rounding. Without retries they stay
+/// off and are warned.
+#[test]
+fn a_fit_far_off_its_points_own_scatter_is_retried() {
+    let mut evaluator = CpuEvaluator::new();
+    for seed in [100051, 100153] {
+        let (case, report) = assert_recovered(&mut evaluator, 100000, seed);
+        assert!(
+            !report
+                .warnings
+                .iter()
+                .any(|w| w.starts_with(supertoroid::fit::OFF_ITS_POINTS_WARNING)),
+            "{seed}: {:?}",
+            report.warnings
+        );
+        let without_retries = FitOptions {
+            unseen_surface_retries: 0,
+            ..view_options(seed, &case, true)
+        };
+        let (recovered, report) = recovers(&mut evaluator, &case, &without_retries);
+        assert!(
+            !recovered
+                && report
+                    .warnings
+                    .iter()
+                    .any(|w| w.starts_with(supertoroid::fit::OFF_ITS_POINTS_WARNING)),
+            "{seed} without retries: recovered {recovered}, warnings {:?}",
+            report.warnings
+        );
+    }
+}
+
+/// The paper's real clouds are not what the model describes exactly (the gear's teeth,
+/// the pot's wall and rim), so their fits leave more than their scatter: the pot 5.5
+/// times it, the roll 2.7, the gear 2.0 (measured when written). The bound of
+/// `fit::MISFIT_OVER_SCATTER` keeps clear of them by half again at least, so they are
+/// neither retried nor warned.
+#[test]
+fn the_paper_clouds_fit_within_the_bound_on_their_scatter() {
+    let mut evaluator = CpuEvaluator::new();
+    for name in ["gearclean", "perfectnoisedisplaced", "pot2clean", "roll"] {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join(format!("../shared/clouds/paper/{name}.pcd"));
+        let points = supertoroid::io::read_cloud(&path, None)
+            .expect("the paper's clouds live in ../shared/clouds/paper");
+        let scatter = supertoroid::fit::scatter::local_scatter(&points).unwrap();
+        let report = fit(&mut evaluator, &points, &FitOptions::default()).unwrap();
+        let ratio = report.quality.median_distance / scatter;
+        assert!(
+            ratio < supertoroid::fit::MISFIT_OVER_SCATTER / 1.5,
+            "{name}: median distance {ratio:.1} times the scatter"
+        );
+        assert!(report.warnings.is_empty(), "{name}: {:?}", report.warnings);
+    }
+}
+
 /// The noise model's refinement goes on through one step of little progress: on 20175
 /// (a single view, 1% noise, 5% outliers) the first such step stopped it in a flat
 /// valley with a3 13% short of the truth; the second step in a row ends it now.

@@ -35,6 +35,7 @@ pub mod free_space;
 pub mod ground_truth;
 pub mod likelihood;
 mod report;
+pub mod scatter;
 pub mod starts;
 
 pub use report::{
@@ -388,9 +389,12 @@ pub fn fit_batch(
     let mut results = fit_batch_once(evaluator, clouds)?;
     refit_without_inconsistent_viewpoints(evaluator, clouds, &mut results)?;
     retry_across_line_of_sight(evaluator, clouds, &mut results)?;
-    retry_unseen_surfaces(evaluator, clouds, &mut results)?;
-    retry_precise_misfits(evaluator, clouds, &mut results)?;
+    let scatters = Scatters::new(clouds);
+    retry_unseen_surfaces(evaluator, clouds, &scatters, &mut results)?;
+    retry_precise_misfits(evaluator, clouds, &scatters, &mut results)?;
     polish_on_more_points(evaluator, clouds, &mut results);
+    warn_off_scatter(clouds, &scatters, &mut results);
+    scatters.charge(&mut results);
     Ok(results)
 }
 
@@ -480,6 +484,7 @@ pub const MAX_UNSEEN_SURFACE_RETRIES: u64 = 16;
 fn retry_unseen_surfaces(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
+    scatters: &Scatters,
     results: &mut [Result<FitReport, FitError>],
 ) -> Result<(), FitError> {
     let uncovered: Vec<usize> = results
@@ -493,7 +498,7 @@ fn retry_unseen_surfaces(
                         .visible_coverage
                         .is_some_and(|c| c < coverage::MIN_VISIBLE_COVERAGE)
                         || r.uncovered_before_model
-                        || precise_but_off(r)
+                        || precise_but_off(r, || scatters.of(clouds, *i))
                         || searched_thoroughly(clouds[*i].1, r))
             })
         })
@@ -668,6 +673,7 @@ pub const PRECISE_MISFIT_RETRIES: u64 = MAX_UNSEEN_SURFACE_RETRIES;
 fn retry_precise_misfits(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
+    scatters: &Scatters,
     results: &mut [Result<FitReport, FitError>],
 ) -> Result<(), FitError> {
     let listed: Vec<(usize, RangeInclusive<u64>)> = results
@@ -679,7 +685,7 @@ fn retry_precise_misfits(
             (r.method == Method::Default
                 && done > 0
                 && done < PRECISE_MISFIT_RETRIES
-                && precise_but_off(r))
+                && precise_but_off(r, || scatters.of(clouds, i)))
             .then_some((i, done + 1..=PRECISE_MISFIT_RETRIES))
         })
         .collect();
@@ -805,12 +811,95 @@ fn polish_on_more_points(
 /// two held-out noise-free views to rounding (50087 at 3.7e-3, 60171 at 3.4e-3; the six
 /// seed sets 1040 -> 1042 of 1080), but the paper's roll, a real scan, sits in that band:
 /// it was retried on every seed, 8 -> 150 ms a fit, and came out farther from its points
-/// (relative RMS 1.13 -> 1.25%).
+/// (relative RMS 1.13 -> 1.25%). Above this band the cloud's own scatter is the
+/// reference instead ([`MISFIT_OVER_SCATTER`]), which tells the roll's sensor noise from
+/// a wrong basin.
 pub const PRECISE_MISFIT: std::ops::Range<f64> = 1e-5..3e-3;
 
-fn precise_but_off(r: &FitReport) -> bool {
-    PRECISE_MISFIT.contains(&(r.quality.median_distance / r.fitted.0.size()))
+/// Above [`PRECISE_MISFIT`] a fit is judged against the cloud's own scatter
+/// ([`scatter::local_scatter`]) instead: one whose median distance is more than
+/// [`MISFIT_OVER_SCATTER`] times it is off its points, whatever their noise.
+fn precise_but_off(r: &FitReport, scatter: impl FnOnce() -> Option<f64>) -> bool {
+    let median = r.quality.median_distance;
+    let relative = median / r.fitted.0.size();
+    PRECISE_MISFIT.contains(&relative)
+        || (relative >= PRECISE_MISFIT.end
+            && scatter().is_some_and(|s| median > MISFIT_OVER_SCATTER * s))
 }
+
+/// A finished fit still farther from its points than [`MISFIT_OVER_SCATTER`] times their
+/// own scatter (above [`PRECISE_MISFIT`], where [`precise_but_off`] judges by it) says
+/// so: a wrong basin the retries did not leave, or an object the model does not
+/// describe.
+fn warn_off_scatter(
+    clouds: &[(&[DVec3], &FitOptions)],
+    scatters: &Scatters,
+    results: &mut [Result<FitReport, FitError>],
+) {
+    for (i, result) in results.iter_mut().enumerate() {
+        let Ok(r) = result else { continue };
+        let median = r.quality.median_distance;
+        if median / r.fitted.0.size() < PRECISE_MISFIT.end {
+            continue;
+        }
+        if let Some(scatter) = scatters.of(clouds, i)
+            && median > MISFIT_OVER_SCATTER * scatter
+        {
+            r.warnings.push(format!(
+                "{OFF_ITS_POINTS_WARNING}: the median distance is {:.0} times the points' own \
+                 scatter about a smooth surface (over {MISFIT_OVER_SCATTER}), so the fit is in a \
+                 wrong basin or the object is not a supertoroid; shape and pose may be far off",
+                median / scatter
+            ));
+        }
+    }
+}
+
+/// How the warning of [`warn_off_scatter`] begins.
+pub const OFF_ITS_POINTS_WARNING: &str = "off its points";
+
+/// Each cloud's [`scatter::local_scatter`], measured the first time a check asks for it
+/// (about a millisecond on a few thousand points; a fit left within [`PRECISE_MISFIT`]
+/// never needs it), with the milliseconds it took.
+struct Scatters(Vec<std::sync::OnceLock<(Option<f64>, f64)>>);
+
+impl Scatters {
+    fn new(clouds: &[(&[DVec3], &FitOptions)]) -> Self {
+        Self(clouds.iter().map(|_| std::sync::OnceLock::new()).collect())
+    }
+
+    fn of(&self, clouds: &[(&[DVec3], &FitOptions)], i: usize) -> Option<f64> {
+        self.0[i]
+            .get_or_init(|| {
+                let start = Instant::now();
+                let scatter = scatter::local_scatter(clouds[i].0);
+                (scatter, start.elapsed().as_secs_f64() * 1e3)
+            })
+            .0
+    }
+
+    /// Adds the time each cloud's scatter took to its fit's total.
+    fn charge(&self, results: &mut [Result<FitReport, FitError>]) {
+        for (measured, result) in self.0.iter().zip(results) {
+            if let (Some((_, ms)), Ok(r)) = (measured.get(), result) {
+                r.timing_ms.total += ms;
+            }
+        }
+    }
+}
+
+/// The largest median distance of a fit, over the cloud's own scatter
+/// ([`scatter::local_scatter`], an RMS: a Gaussian's median distance is 0.67 of it),
+/// that is not retried as a wrong basin. On the suite's single views (four seed sets,
+/// 360 cases) the right fits left at most 2.5 (outliers raise the median), the wrong
+/// basins above [`PRECISE_MISFIT`] 4.2 to 72 (50087 4.2, 40088 7.1, 100153 15, 100123
+/// 60, 100051 72). But a real object is never exactly a supertoroid: the paper's pot
+/// leaves 5.5 (its wall and rim), the roll 2.7, the gear 2.0, and at 3.5 the pot was
+/// retried on every seed (8 -> 140 ms) and one of ten retries ended 88 degrees off. At 10
+/// the three noise-free views above 10 are retried and fitted to rounding (100051,
+/// 100123, 100153; 60081 too, which the first retries had left above the band), and
+/// the paper's clouds are left alone.
+pub const MISFIT_OVER_SCATTER: f64 = 10.0;
 
 /// What [`FitOptions::thorough`] retries: with the noise model on, a single-view fit whose
 /// noise is large enough for the model ([`LIKELIHOOD_VIEW_NOISE_RATIO`] of its thinnest
