@@ -217,7 +217,7 @@ pub struct FitArgs {
     pub viewpoint: Option<String>,
     /// other downsampling seeds to try when, with --viewpoint, the fit leaves most of the
     /// surface it shows the sensor without points, or the fit stays off a precise cloud
-    /// (then up to 16 in all); 0 turns the retries off; at most 16
+    /// or off its points' own scatter (then up to 16 in all); 0 turns the retries off; at most 16
     #[arg(long, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=crate::fit::MAX_UNSEEN_SURFACE_RETRIES))]
     pub retries: u64,
     /// skip the noise model's polish of noisy fits and its rescue of uncovered single

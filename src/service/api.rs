@@ -61,7 +61,7 @@ pub struct FitRequestOptions {
     pub viewpoint: Option<[f64; 3]>,
     /// other downsampling seeds to try when, with a viewpoint, the fit leaves most of the
     /// surface it shows the sensor without points, or the fit stays off a precise cloud
-    /// (then up to 16 in all) (default 3, 0 turns them off, at most 16); each retry costs
+    /// or off its points' own scatter (then up to 16 in all) (default 3, 0 turns them off, at most 16); each retry costs
     /// about one fit, and only such fits are retried
     pub retries: Option<u64>,
     /// polish a noisy fit under a model of the noise, and rescue an uncovered single view
