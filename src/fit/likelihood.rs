@@ -22,7 +22,8 @@
 //!
 //! The surface integral is a sum over a polar grid of the surface (cells at most
 //! [`CELL_SIGMAS`] sigmas across, where a Gaussian kernel's sum equals its integral to a
-//! fraction of a percent), each data point meeting only the cells within [`CUTOFF`] sigmas
+//! fraction of a percent; [`refine_finely`] halves that along the section, whose
+//! curvature the coarser rings bend the optimum with), each data point meeting only the cells within [`CUTOFF`] sigmas
 //! of it (a uniform bucket grid). The parameters, sigma with them, are found by
 //! Levenberg-Marquardt on the negative mean log-likelihood, the gradient in closed form
 //! for the pose and sigma and by differences of the (cheap, separable) grid for the shape.
@@ -396,14 +397,25 @@ fn perimeter(a: f64, b: f64, eps: f64) -> f64 {
 /// integral to 2·exp(-2 pi² / 2²), 1.4% (Poisson summation).
 pub const CELL_SIGMAS: f64 = 2.0;
 
-/// Grid size for cells about [`CELL_SIGMAS`] sigmas across, capped at [`MAX_CELLS`].
-fn grid_for(shape: &[f64; 6], sigma: f64) -> (usize, usize) {
-    let sigma = CELL_SIGMAS * sigma;
+/// The rings of [`refine_finely`] are at most this many sigmas apart along the section
+/// (half of [`CELL_SIGMAS`]). On a section only a few sigmas thick, rings
+/// [`CELL_SIGMAS`] apart bias the model's optimum: refined from the true parameters on
+/// 16,000 points of full clouds at 2% noise (40008, 50098, 100044, three samples each),
+/// eps1 came out +0.01 to +0.11 high (mean +0.04) and a3 up to 3% long; with rings one
+/// sigma apart, -0.06 to +0.07 (mean 0.00) and a3 within 2%. Finer sectors changed
+/// nothing.
+pub const FINE_SECTION_CELL_SIGMAS: f64 = 1.0;
+
+/// Grid size for cells about `section_cell_sigmas` sigmas along the section and
+/// [`CELL_SIGMAS`] around the hole, capped at [`MAX_CELLS`].
+fn grid_for(shape: &[f64; 6], sigma: f64, section_cell_sigmas: f64) -> (usize, usize) {
     let [a1, a2, a3, a4, eps1, eps2] = *shape;
     let section = perimeter(a1.max(a2), a3, eps1);
     let outer = perimeter(a1 * (a4 + 1.0), a2 * (a4 + 1.0), eps2);
-    let mut rings = (section / sigma).ceil().clamp(16.0, 400.0);
-    let mut sectors = (outer / sigma).ceil().clamp(32.0, 2000.0);
+    let mut rings = (section / (section_cell_sigmas * sigma))
+        .ceil()
+        .clamp(16.0, 400.0);
+    let mut sectors = (outer / (CELL_SIGMAS * sigma)).ceil().clamp(32.0, 2000.0);
     let cells = rings * sectors;
     if cells > MAX_CELLS as f64 {
         let shrink = (MAX_CELLS as f64 / cells).sqrt();
@@ -443,6 +455,8 @@ struct Problem<'a> {
     viewpoint: Option<DVec3>,
     /// data points meet the cells within this many sigmas ([`CUTOFF`] for the fit)
     cutoff: f64,
+    /// the rings' spacing along the section, in sigmas ([`grid_for`])
+    section_cell_sigmas: f64,
 }
 
 /// Cells bucketed on a uniform grid of `cell`-sized boxes (a counting sort).
@@ -558,9 +572,10 @@ impl<'a> Problem<'a> {
             outlier_weight,
             outlier_density: outlier_weight / volume,
             rotation0: candidate.pose.rotation,
-            grid: grid_for(&s.to_array(), sigma),
+            grid: grid_for(&s.to_array(), sigma, CELL_SIGMAS),
             viewpoint,
             cutoff,
+            section_cell_sigmas: CELL_SIGMAS,
         };
         let t = candidate.pose.translation;
         let x = Vector::from_column_slice(&[
@@ -776,7 +791,7 @@ impl Problem<'_> {
 /// cloud covers nearly all of its surface, a single view the side that faced the sensor.
 pub fn surface_coverage(points: &[DVec3], candidate: &Candidate, sigma: f64) -> f64 {
     let shape = candidate.shape.to_array();
-    let (rings, sectors) = grid_for(&shape, sigma);
+    let (rings, sectors) = grid_for(&shape, sigma, CELL_SIGMAS);
     let (canonical, areas, _) = surface_cells(&shape, rings, sectors);
     let pose = &candidate.pose;
     let cells: Vec<DVec3> = canonical.iter().map(|p| pose.to_world(*p)).collect();
@@ -821,8 +836,39 @@ pub fn refine(
     limits: &Limits,
     max_iterations: usize,
 ) -> Option<Refined> {
-    let (mut problem, mut x) =
-        Problem::at(points, start, sigma, outlier_weight, viewpoint, CUTOFF)?;
+    let problem = Problem::at(points, start, sigma, outlier_weight, viewpoint, CUTOFF)?;
+    refine_problem(problem, start, sigma, limits, max_iterations)
+}
+
+/// The signature of [`refine`] and [`refine_finely`].
+pub type Refine =
+    fn(&[DVec3], &Candidate, f64, f64, Option<DVec3>, &Limits, usize) -> Option<Refined>;
+
+/// [`refine`] on a grid twice as fine along the section
+/// ([`FINE_SECTION_CELL_SIGMAS`]): an optimum without the coarse grid's bias, at about
+/// twice the cost per step, for the fit's last polish.
+pub fn refine_finely(
+    points: &[DVec3],
+    start: &Candidate,
+    sigma: f64,
+    outlier_weight: f64,
+    viewpoint: Option<DVec3>,
+    limits: &Limits,
+    max_iterations: usize,
+) -> Option<Refined> {
+    let (mut problem, x) = Problem::at(points, start, sigma, outlier_weight, viewpoint, CUTOFF)?;
+    problem.section_cell_sigmas = FINE_SECTION_CELL_SIGMAS;
+    problem.grid = grid_for(&start.shape.to_array(), sigma, FINE_SECTION_CELL_SIGMAS);
+    refine_problem((problem, x), start, sigma, limits, max_iterations)
+}
+
+fn refine_problem(
+    (mut problem, mut x): (Problem, Vector),
+    start: &Candidate,
+    sigma: f64,
+    limits: &Limits,
+    max_iterations: usize,
+) -> Option<Refined> {
     let axis = start.pose.axis();
     // what is held fixed leaves the step: known shape parameters, and with a known axis
     // every turn but the one about it
@@ -889,7 +935,14 @@ pub fn refine(
             x[9] = 0.0;
             x[10] = 0.0;
             x[11] = 0.0;
-            problem.grid = regrid(problem.grid, grid_for(&Problem::shape(&x), x[12].exp()));
+            problem.grid = regrid(
+                problem.grid,
+                grid_for(
+                    &Problem::shape(&x),
+                    x[12].exp(),
+                    problem.section_cell_sigmas,
+                ),
+            );
             (f, g, h) = problem.evaluate(&x, true);
             lambda = (lambda / 3.0).max(1e-9);
             small_steps = if decrease < STOP_DECREASE {
@@ -1086,7 +1139,7 @@ mod tests {
         let points = crate::synth::subsample(&view.points, 3000, &mut crate::synth::rng(1));
         let viewpoint = camera.pose.translation;
         let sigma = 0.015 * shape.size();
-        let (rings, sectors) = grid_for(&shape.to_array(), sigma);
+        let (rings, sectors) = grid_for(&shape.to_array(), sigma, CELL_SIGMAS);
         let (canonical, areas, normals) = surface_cells(&shape.to_array(), rings, sectors);
         let cells: Vec<DVec3> = canonical.iter().map(|c| pose.to_world(*c)).collect();
         let world_normals: Vec<DVec3> = normals.iter().map(|n| pose.rotation * *n).collect();
@@ -1224,7 +1277,7 @@ mod tests {
             outlier_weight: 0.05,
             outlier_density: 0.05 / 8.0,
             rotation0: pose.rotation,
-            grid: grid_for(&shape.to_array(), 0.03),
+            grid: grid_for(&shape.to_array(), 0.03, CELL_SIGMAS),
             viewpoint,
             cutoff: CUTOFF,
         };
