@@ -1280,6 +1280,7 @@ mod tests {
             grid: grid_for(&shape.to_array(), 0.03, CELL_SIGMAS),
             viewpoint,
             cutoff: CUTOFF,
+            section_cell_sigmas: CELL_SIGMAS,
         };
         let x = Vector::from_column_slice(&[
             0.31,
