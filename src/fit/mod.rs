@@ -873,11 +873,11 @@ pub const OFF_ITS_POINTS_WARNING: &str = "off its points";
 /// Each cloud's [`scatter::local_scatter`], measured the first time a check asks for it
 /// (about a millisecond on a few thousand points; a fit left within [`PRECISE_MISFIT`]
 /// never needs it), with the milliseconds it took.
-struct Scatters(Vec<std::sync::OnceLock<(Option<f64>, f64)>>);
+struct Scatters(Vec<std::cell::OnceCell<(Option<f64>, f64)>>);
 
 impl Scatters {
     fn new(clouds: &[(&[DVec3], &FitOptions)]) -> Self {
-        Self(clouds.iter().map(|_| std::sync::OnceLock::new()).collect())
+        Self(clouds.iter().map(|_| std::cell::OnceCell::new()).collect())
     }
 
     fn of(&self, clouds: &[(&[DVec3], &FitOptions)], i: usize) -> Option<f64> {

@@ -46,16 +46,10 @@ pub fn local_scatter(cloud: &[DVec3]) -> Option<f64> {
     let mut scatter: Vec<f64> = centres
         .par_iter()
         .map_init(Vec::new, |dist: &mut Vec<(f64, usize)>, p| {
-            dist.clear();
-            dist.extend(
-                points
-                    .iter()
-                    .enumerate()
-                    .map(|(j, q)| ((*q - *p).length_squared(), j)),
-            );
-            let k = NEIGHBOURS.min(dist.len() - 1);
-            dist.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0));
-            let neighbours: Vec<DVec3> = dist[..=k].iter().map(|&(_, j)| points[j]).collect();
+            let neighbours: Vec<DVec3> = super::starts::nearest(&points, *p, NEIGHBOURS, dist)
+                .iter()
+                .map(|&(_, j)| points[j])
+                .collect();
             quadric_residual_rms(&neighbours)
         })
         .flatten()

@@ -26,16 +26,7 @@ pub fn estimate_normals(points: &[DVec3], k: usize) -> Vec<DVec3> {
     points
         .par_iter()
         .map_init(Vec::new, |dist: &mut Vec<(f64, usize)>, p| {
-            dist.clear();
-            dist.extend(
-                points
-                    .iter()
-                    .enumerate()
-                    .map(|(j, q)| ((*q - *p).length_squared(), j)),
-            );
-            let k = k.min(dist.len() - 1);
-            dist.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0));
-            let neighbours = &dist[..=k];
+            let neighbours = nearest(points, *p, k, dist);
             let mean =
                 neighbours.iter().map(|&(_, j)| points[j]).sum::<DVec3>() / neighbours.len() as f64;
             let mut cov = Matrix3::<f64>::zeros();
@@ -50,6 +41,27 @@ pub fn estimate_normals(points: &[DVec3], k: usize) -> Vec<DVec3> {
             DVec3::new(n[0], n[1], n[2]).normalize_or(DVec3::Z)
         })
         .collect()
+}
+
+/// The point `p` and its `k` nearest neighbours among `points` (fewer where there are
+/// not so many), as (squared distance, index) in no particular order, by brute force in
+/// `dist` (kept between calls to save its allocation).
+pub(crate) fn nearest<'a>(
+    points: &[DVec3],
+    p: DVec3,
+    k: usize,
+    dist: &'a mut Vec<(f64, usize)>,
+) -> &'a [(f64, usize)] {
+    dist.clear();
+    dist.extend(
+        points
+            .iter()
+            .enumerate()
+            .map(|(j, q)| ((*q - p).length_squared(), j)),
+    );
+    let k = k.min(dist.len() - 1);
+    dist.select_nth_unstable_by(k, |a, b| a.0.total_cmp(&b.0));
+    &dist[..=k]
 }
 
 /// The axis that the normal lines meet best: (unit direction, a point on it), or None
