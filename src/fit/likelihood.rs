@@ -560,6 +560,7 @@ impl<'a> Problem<'a> {
         outlier_weight: f64,
         viewpoint: Option<DVec3>,
         cutoff: f64,
+        section_cell_sigmas: f64,
     ) -> Option<(Self, Vector)> {
         let s = candidate.shape;
         if s.a4 <= 1.0 || !(sigma > 0.0) || points.len() < 20 {
@@ -572,10 +573,10 @@ impl<'a> Problem<'a> {
             outlier_weight,
             outlier_density: outlier_weight / volume,
             rotation0: candidate.pose.rotation,
-            grid: grid_for(&s.to_array(), sigma, CELL_SIGMAS),
+            grid: grid_for(&s.to_array(), sigma, section_cell_sigmas),
             viewpoint,
             cutoff,
-            section_cell_sigmas: CELL_SIGMAS,
+            section_cell_sigmas,
         };
         let t = candidate.pose.translation;
         let x = Vector::from_column_slice(&[
@@ -836,7 +837,15 @@ pub fn refine(
     limits: &Limits,
     max_iterations: usize,
 ) -> Option<Refined> {
-    let problem = Problem::at(points, start, sigma, outlier_weight, viewpoint, CUTOFF)?;
+    let problem = Problem::at(
+        points,
+        start,
+        sigma,
+        outlier_weight,
+        viewpoint,
+        CUTOFF,
+        CELL_SIGMAS,
+    )?;
     refine_problem(problem, start, sigma, limits, max_iterations)
 }
 
@@ -856,10 +865,16 @@ pub fn refine_finely(
     limits: &Limits,
     max_iterations: usize,
 ) -> Option<Refined> {
-    let (mut problem, x) = Problem::at(points, start, sigma, outlier_weight, viewpoint, CUTOFF)?;
-    problem.section_cell_sigmas = FINE_SECTION_CELL_SIGMAS;
-    problem.grid = grid_for(&start.shape.to_array(), sigma, FINE_SECTION_CELL_SIGMAS);
-    refine_problem((problem, x), start, sigma, limits, max_iterations)
+    let problem = Problem::at(
+        points,
+        start,
+        sigma,
+        outlier_weight,
+        viewpoint,
+        CUTOFF,
+        FINE_SECTION_CELL_SIGMAS,
+    )?;
+    refine_problem(problem, start, sigma, limits, max_iterations)
 }
 
 fn refine_problem(
@@ -1003,6 +1018,7 @@ pub fn scores(
         outlier_weight,
         viewpoint,
         SCORE_CUTOFF,
+        CELL_SIGMAS,
     )?;
     let (_, gradient, outer) = problem.evaluate(&x, true);
     (outer.iter().chain(gradient.iter()).all(|v| v.is_finite())).then_some(Scores {
@@ -1022,7 +1038,15 @@ pub fn objective(
     outlier_weight: f64,
     viewpoint: Option<DVec3>,
 ) -> Option<f64> {
-    let (problem, x) = Problem::at(points, candidate, sigma, outlier_weight, viewpoint, CUTOFF)?;
+    let (problem, x) = Problem::at(
+        points,
+        candidate,
+        sigma,
+        outlier_weight,
+        viewpoint,
+        CUTOFF,
+        CELL_SIGMAS,
+    )?;
     Some(problem.evaluate(&x, false).0)
 }
 
