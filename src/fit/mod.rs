@@ -190,8 +190,9 @@ pub struct FitOptions {
     pub thorough: bool,
     /// a fit the noise model refined is refined by it once more at the end, on up to this
     /// many of the cloud's points (all of them where the cloud has fewer), and its top
-    /// view read both ways again (see `polish_on_more_points` in this module); 0 turns
-    /// this off
+    /// view read both ways again (see `polish_on_more_points` in this module); a fit the
+    /// retries left off a precise cloud is refined by least squares on as many
+    /// (`polish_precise_misfits`); 0 turns both off
     pub polish_points: usize,
 }
 
@@ -392,6 +393,7 @@ pub fn fit_batch(
     let scatters = Scatters::new(clouds);
     retry_unseen_surfaces(evaluator, clouds, &scatters, &mut results)?;
     retry_precise_misfits(evaluator, clouds, &scatters, &mut results)?;
+    polish_precise_misfits(evaluator, clouds, &mut results)?;
     polish_on_more_points(evaluator, clouds, &mut results);
     warn_off_scatter(clouds, &scatters, &mut results);
     scatters.charge(&mut results);
@@ -701,6 +703,85 @@ fn retry_precise_misfits(
             best.timing_ms.total = current.timing_ms.total + start.elapsed().as_secs_f64() * 1e3;
             results[*i] = Ok(best);
         }
+    }
+    Ok(())
+}
+
+/// A fit the retries left off a precise cloud ([`PRECISE_MISFIT`]) is often at the far
+/// end of a slow valley of the cost, not in another basin: the noise-free single views
+/// with outliers 50105 (sizes 21% off, median distance 1.4e-4 of the size after 16
+/// retries) and 60069 (26%, 8e-5), whose outliers pull along the valley on a 1000-point
+/// sample. Refined once more by [`refine_robustly`]'s Cauchy rounds on up to
+/// [`FitOptions::polish_points`] of the cloud's points, 50105 comes to rounding (from
+/// this fit, on 1000 other points of the cloud too). The refined fit replaces the fit
+/// where it brings the cloud's points closer (median distance) and may stand where the
+/// fit did; its time counts as stage 2's.
+fn polish_precise_misfits(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+    results: &mut [Result<FitReport, FitError>],
+) -> Result<(), FitError> {
+    for (result, (cloud, options)) in results.iter_mut().zip(clouds) {
+        let Ok(fitted) = result.as_ref() else {
+            continue;
+        };
+        let relative = fitted.quality.median_distance / fitted.fitted.0.size();
+        if fitted.method != Method::Default
+            || fitted.noise_modelled
+            || options.polish_points == 0
+            || !PRECISE_MISFIT.contains(&relative)
+        {
+            continue;
+        }
+        let start = Instant::now();
+        let polish_options = FitOptions {
+            stage2_points: options.polish_points,
+            ..(*options).clone()
+        };
+        let Ok(p) = prepare(cloud, &polish_options, StartSet::Usual) else {
+            continue;
+        };
+        evaluator.set_point_sets_with_free_space(&[p.stage2_set()])?;
+        // (the rounds read only the candidate and the iterations so far; the first round
+        // always stands, so cost and stop are the refinement's own)
+        let from = Solution {
+            candidate: p.norm.candidate(&fitted.fitted.0, &fitted.fitted.1),
+            cost: 0.0,
+            count: p.stage2_pts.len() as u64,
+            iterations: fitted.iterations.stage2,
+            stop: crate::solve::Stop::IterationCap,
+            log: Vec::new(),
+        };
+        let group = [(0, p)];
+        let refined = refine_robustly(evaluator, &group, vec![from], &group[0].1.opts2)?
+            .pop()
+            .expect("one solution per cloud");
+        let p = &group[0].1;
+        let mut polished = report(
+            p,
+            &refined.candidate,
+            refined.iterations,
+            None,
+            fitted.iterations.stage1,
+            evaluator,
+        );
+        if polished.quality.median_distance >= fitted.quality.median_distance
+            || (may_stand(fitted) && !may_stand(&polished))
+        {
+            continue;
+        }
+        let spent = start.elapsed().as_secs_f64() * 1e3;
+        polished.timing_ms = Timing {
+            stage1: fitted.timing_ms.stage1,
+            stage2: fitted.timing_ms.stage2 + spent,
+            total: fitted.timing_ms.total + spent,
+        };
+        polished.points = PointsOut {
+            polish: Some(p.stage2_pts.len()),
+            ..fitted.points.clone()
+        };
+        polished.uncovered_before_model = fitted.uncovered_before_model;
+        *result = Ok(polished);
     }
     Ok(())
 }
@@ -1823,8 +1904,12 @@ pub const DUAL_READING_MARGIN: f64 = 0.05;
 /// other reading, gained; none lost), median fit time unchanged.
 pub const COVERED_DUAL_READING_MARGIN: f64 = 0.0;
 
-/// A top view whose eps2 is within this of 1 (an ellipse) is not read the other way.
-const DUAL_MIN_ROUNDNESS_GAP: f64 = 0.25;
+/// A top view whose eps2 is within this of 1 (an ellipse) is not read the other way: its
+/// other reading (2 - eps2) is within the suite's eps tolerance of 0.15 of it. At 0.25
+/// the nearly round tops of full clouds fitted in the wrong reading stayed there (90004:
+/// eps2 1.11 fitted 0.88); nine seed sets 1579 -> 1581 of 1620 (90004 and 100139 gained,
+/// none lost).
+const DUAL_MIN_ROUNDNESS_GAP: f64 = 0.07;
 /// The other reading goes on to convergence only when it is more likely than the model's
 /// fit after this many iterations.
 const DUAL_FIRST_ITERATIONS: usize = 8;

@@ -57,8 +57,8 @@ pub struct PointsOut {
     pub input: usize,
     pub stage1: usize,
     pub stage2: usize,
-    /// the points of the noise model's final polish, where it ran (see
-    /// [`super::FitOptions::polish_points`])
+    /// the points of the final polish, where one ran (the noise model's, or a precise
+    /// misfit's; see [`super::FitOptions::polish_points`])
     #[serde(skip_serializing_if = "Option::is_none")]
     pub polish: Option<usize>,
 }
