@@ -734,11 +734,7 @@ fn polish_precise_misfits(
             continue;
         }
         let start = Instant::now();
-        let polish_options = FitOptions {
-            stage2_points: options.polish_points,
-            ..(*options).clone()
-        };
-        let Ok(p) = prepare(cloud, &polish_options, StartSet::Usual) else {
+        let Some(p) = prepare_polish(cloud, options) else {
             continue;
         };
         evaluator.set_point_sets_with_free_space(&[p.stage2_set()])?;
@@ -757,7 +753,7 @@ fn polish_precise_misfits(
             .pop()
             .expect("one solution per cloud");
         let p = &group[0].1;
-        let mut polished = report(
+        let polished = report(
             p,
             &refined.candidate,
             refined.iterations,
@@ -770,18 +766,7 @@ fn polish_precise_misfits(
         {
             continue;
         }
-        let spent = start.elapsed().as_secs_f64() * 1e3;
-        polished.timing_ms = Timing {
-            stage1: fitted.timing_ms.stage1,
-            stage2: fitted.timing_ms.stage2 + spent,
-            total: fitted.timing_ms.total + spent,
-        };
-        polished.points = PointsOut {
-            polish: Some(p.stage2_pts.len()),
-            ..fitted.points.clone()
-        };
-        polished.uncovered_before_model = fitted.uncovered_before_model;
-        *result = Ok(polished);
+        *result = Ok(polish_of(polished, fitted, p.stage2_pts.len(), start));
     }
     Ok(())
 }
@@ -842,13 +827,7 @@ fn polish_on_more_points(
             continue;
         }
         let start = Instant::now();
-        // the cloud as a stage 2 on the polish's points would see it (sampled with the
-        // fit's seed; the whole cloud where it has no more)
-        let polish_options = FitOptions {
-            stage2_points: options.polish_points,
-            ..(*options).clone()
-        };
-        let Ok(p) = prepare(cloud, &polish_options, StartSet::Usual) else {
+        let Some(p) = prepare_polish(cloud, options) else {
             continue;
         };
         let c = p.norm.candidate(&fitted.fitted.0, &fitted.fitted.1);
@@ -865,7 +844,7 @@ fn polish_on_more_points(
         ) else {
             continue;
         };
-        let mut polished = report(
+        let polished = report(
             &p,
             &refined.candidate,
             fitted.iterations.stage2 + refined.iterations,
@@ -876,19 +855,40 @@ fn polish_on_more_points(
         if may_stand(fitted) && !may_stand(&polished) {
             continue;
         }
-        let spent = start.elapsed().as_secs_f64() * 1e3;
-        polished.timing_ms = Timing {
-            stage1: fitted.timing_ms.stage1,
-            stage2: fitted.timing_ms.stage2 + spent,
-            total: fitted.timing_ms.total + spent,
-        };
-        polished.points = PointsOut {
-            polish: Some(p.stage2_pts.len()),
-            ..fitted.points.clone()
-        };
-        polished.uncovered_before_model = fitted.uncovered_before_model;
-        *result = Ok(polished);
+        *result = Ok(polish_of(polished, fitted, p.stage2_pts.len(), start));
     }
+}
+
+/// The cloud as a stage 2 on the polish's points ([`FitOptions::polish_points`]) would
+/// see it: sampled with the fit's seed, the whole cloud where it has no more.
+fn prepare_polish<'a>(cloud: &'a [DVec3], options: &FitOptions) -> Option<Prepared<'a>> {
+    let polish_options = FitOptions {
+        stage2_points: options.polish_points,
+        ..options.clone()
+    };
+    prepare(cloud, &polish_options, StartSet::Usual).ok()
+}
+
+/// `polished` (on `points` of the cloud, since `start`) in place of `fitted`: the
+/// polish's time counts as stage 2's, and the fit's points and checks carry over.
+fn polish_of(
+    mut polished: FitReport,
+    fitted: &FitReport,
+    points: usize,
+    start: Instant,
+) -> FitReport {
+    let spent = start.elapsed().as_secs_f64() * 1e3;
+    polished.timing_ms = Timing {
+        stage1: fitted.timing_ms.stage1,
+        stage2: fitted.timing_ms.stage2 + spent,
+        total: fitted.timing_ms.total + spent,
+    };
+    polished.points = PointsOut {
+        polish: Some(points),
+        ..fitted.points.clone()
+    };
+    polished.uncovered_before_model = fitted.uncovered_before_model;
+    polished
 }
 
 /// A cloud that lies on its surface to a fraction of a per mille (a CAD model's, a
