@@ -217,7 +217,8 @@ pub struct FitArgs {
     pub viewpoint: Option<String>,
     /// other downsampling seeds to try when, with --viewpoint, the fit leaves most of the
     /// surface it shows the sensor without points, or the fit stays off a precise cloud
-    /// or off its points' own scatter (then up to 16 in all); 0 turns the retries off; at most 16
+    /// or off its points' own scatter (then up to 16 in all where these leave it so); 0
+    /// turns the retries off; at most 16
     #[arg(long, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=crate::fit::MAX_UNSEEN_SURFACE_RETRIES))]
     pub retries: u64,
     /// skip the noise model's polish of noisy fits and its rescue of uncovered single
@@ -226,9 +227,9 @@ pub struct FitArgs {
     #[arg(long)]
     pub no_noise_model: bool,
     /// with --viewpoint: retry every noisy single view as an uncovered one is retried,
-    /// and keep the most likely of the covered fits under the noise model (about 1% more
-    /// fits within tolerance on the ground-truth suite, at 3-4 times the time of such
-    /// fits)
+    /// and keep the most likely of the covered fits under the noise model (by default
+    /// only those whose fit is just covered; all of them gained nothing more on the
+    /// ground-truth suite, at about 3 times the time of such fits)
     #[arg(long)]
     pub thorough: bool,
     /// points of the noise model's final polish of a noisy fit (all of the cloud's where

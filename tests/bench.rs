@@ -183,6 +183,19 @@ fn bench_synthetic_and_scaling_write_every_field() {
         if c["noise"].as_f64() == Some(0.0) {
             assert_eq!(attainable, 1.0);
         }
+        // the share of the visible surface with points: only single views have one
+        match c["visible_coverage"].as_f64() {
+            Some(coverage) => {
+                assert!(
+                    c["partial"] == true && (0.0..=1.0).contains(&coverage),
+                    "{c}"
+                )
+            }
+            None => assert!(
+                c["partial"] == false && c["visible_coverage"].is_null(),
+                "{c}"
+            ),
+        }
     }
     let overall = v["attainable_overall_rate"].as_f64().unwrap();
     assert!((0.0..=1.0).contains(&overall), "{overall}");

@@ -46,6 +46,9 @@ pub struct Case {
     /// the share of an efficient estimator's fits of this cloud within the tolerances
     /// (`fit::attainable`: the Cramér-Rao bound of its inliers); NaN where it has none
     pub attainable: f64,
+    /// the share of the fit's visible surface that has points on it (`fit::coverage`,
+    /// single views with the viewpoint); NaN without one
+    pub visible_coverage: f64,
 }
 
 /// Successes among the cases of one cloud kind in one band of a quantity.
@@ -209,6 +212,7 @@ pub fn run(
                 .iter()
                 .any(|w| w.starts_with("off a precise")),
             attainable: attainable::suite_case(&case, case_seed).unwrap_or(f64::NAN),
+            visible_coverage: report.quality.visible_coverage.unwrap_or(f64::NAN),
         });
         bar.inc(1);
     }
@@ -308,11 +312,11 @@ impl Report for SyntheticReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,noise_warning,coverage_warning,attainable,misfit_warning\n",
+            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,noise_warning,coverage_warning,attainable,misfit_warning,visible_coverage\n",
         );
         for c in &self.cases {
             s += &format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 c.seed,
                 c.partial,
                 c.noise,
@@ -328,7 +332,8 @@ impl Report for SyntheticReport {
                 c.noise_warning,
                 c.coverage_warning,
                 c.attainable,
-                c.misfit_warning
+                c.misfit_warning,
+                c.visible_coverage
             );
         }
         s
