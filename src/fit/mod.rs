@@ -393,7 +393,7 @@ pub fn fit_batch(
     retry_across_line_of_sight(evaluator, clouds, &mut results)?;
     let scatters = Scatters::new(clouds);
     let retried = retry_unseen_surfaces(evaluator, clouds, &scatters, &mut results)?;
-    retry_precise_misfits(evaluator, clouds, &scatters, &retried, &mut results)?;
+    retry_lasting_misfits(evaluator, clouds, &scatters, &retried, &mut results)?;
     polish_precise_misfits(evaluator, clouds, &mut results)?;
     polish_on_more_points(evaluator, clouds, &mut results);
     warn_off_scatter(clouds, &scatters, &mut results);
@@ -483,7 +483,7 @@ pub const MAX_UNSEEN_SURFACE_RETRIES: u64 = 16;
 /// [`FitOptions::thorough`] every such view is retried too); when none may stand, the
 /// noise model tries to rescue the first fit ([`rescue_unseen_surface`]), and failing
 /// that the first fit stands with its warning. A fit still off a precise cloud goes on
-/// to [`retry_precise_misfits`]. Returns the clouds it retried.
+/// to [`retry_lasting_misfits`]. Returns the clouds it retried.
 fn retry_unseen_surfaces(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
@@ -664,7 +664,7 @@ fn best_retry(
 
 /// Retries in all, at most, of a fit that stays off a precise cloud
 /// ([`precise_but_off`]): where the first [`UNSEEN_SURFACE_RETRIES`] leave it there,
-/// [`retry_precise_misfits`] goes on up to this many. On the suite, 30051 and 30123 (sizes
+/// [`retry_lasting_misfits`] goes on up to this many. On the suite, 30051 and 30123 (sizes
 /// 240% and 14% off after 3 retries, still 146% and 14% after 8) were recovered to
 /// rounding by 16, each fit taking about 400 ms instead of 90.
 pub const PRECISE_MISFIT_RETRIES: u64 = MAX_UNSEEN_SURFACE_RETRIES;
@@ -676,7 +676,7 @@ pub const PRECISE_MISFIT_RETRIES: u64 = MAX_UNSEEN_SURFACE_RETRIES;
 /// retries left off its points' own scatter ([`RETRIED_MISFIT_OVER_SCATTER`]), judged as
 /// [`best_retry`] judges the first retries. Nothing is retried where the caller turned
 /// the retries off.
-fn retry_precise_misfits(
+fn retry_lasting_misfits(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
     scatters: &Scatters,
