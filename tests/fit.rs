@@ -566,7 +566,10 @@ fn recovers(evaluator: &mut CpuEvaluator, case: &Case, options: &FitOptions) -> 
 /// The robust refinement at the end of stage 2 (a Cauchy loss scaled by the cloud's own
 /// residual spread): on the suite's 20 noise-free single-view clouds with 5-10%
 /// outliers, the fit with it must recover clearly more shapes than without it (measured
-/// when written: 16 of 20 with it, 11 without).
+/// when written: 16 of 20 with it, 11 without). Both without the last polish of a
+/// precise misfit (`FitOptions::polish_points`), which solves at small Cauchy scales too
+/// and since the twenty-fourth session recovers most of them either way (19 and 18 with
+/// it; 19 and 12 with it off in both arms).
 #[test]
 fn the_robust_refinement_shakes_off_outliers_on_one_sided_views() {
     let mut evaluator = CpuEvaluator::new();
@@ -576,6 +579,7 @@ fn the_robust_refinement_shakes_off_outliers_on_one_sided_views() {
         let options = |refine_scale| FitOptions {
             seed: *seed,
             refine_scale,
+            polish_points: 0,
             ..Default::default()
         };
         let default_scale = FitOptions::default().refine_scale;
@@ -659,8 +663,9 @@ fn noise_free_views_with_outliers_are_fitted_to_rounding() {
 /// where that distance is too large for a precise cloud: 100153 (noise-free, no
 /// outliers; a flat ring fitted with its sizes 21% off, 15 times its scatter) and 100051
 /// (noise-free, 10% outliers; an edge-on ring fitted as a closed body, 72 times) are
-/// fitted again with other seeds and recovered to rounding. Without retries they stay
-/// off and are warned.
+/// fitted again with other seeds and recovered to rounding. Without retries (and
+/// without the precise misfit's polish, which since the twenty-fourth session recovers
+/// 100153 from its first fit too) they stay off and are warned.
 #[test]
 fn a_fit_far_off_its_points_own_scatter_is_retried() {
     let mut evaluator = CpuEvaluator::new();
@@ -676,6 +681,7 @@ fn a_fit_far_off_its_points_own_scatter_is_retried() {
         );
         let without_retries = FitOptions {
             unseen_surface_retries: 0,
+            polish_points: 0,
             ..view_options(seed, &case, true)
         };
         let (recovered, report) = recovers(&mut evaluator, &case, &without_retries);
@@ -836,27 +842,76 @@ fn the_robust_refinement_finishes_a_slow_valley_on_a_precise_view() {
     assert!(report.warnings.is_empty(), "{:?}", report.warnings);
 }
 
-/// A fit the retries leave off a precise cloud is refined once more on all its points
-/// (`fit::polish_precise_misfits`, part of the polish of `FitOptions::polish_points`):
-/// the held-out noise-free view 50105 (10% outliers) ended 16 retries with its sizes 21%
-/// off and its points 1.4e-4 of the size away, at the far end of a slow valley the
-/// outliers of a 1000-point sample held it in; on all points it comes to rounding.
+/// A fit the retries leave off a precise cloud is solved again on all its points from
+/// further starts, at Cauchy scales coming down to 1e-5 of the cloud's radius
+/// (`fit::polish_precise_misfits`, part of the polish of `FitOptions::polish_points`).
+/// The held-out noise-free views with 10% outliers 50105 (sizes 21% off after 16
+/// retries, its points 1.4e-4 of the size away: the far end of a slow valley), 60069
+/// (26% off: a thicker tube through the same ring, 7e-5 of the size away, where the
+/// fit's own robust scale let the outliers hold it) and 50087 (eps2 0.77 for 1.57, 4e-3
+/// of the size away, its misfit taken for noise until the scatter gate) come to
+/// rounding; without the polish they stay wrong.
 #[test]
 fn a_precise_misfit_is_refined_on_all_its_points() {
     let mut evaluator = CpuEvaluator::new();
-    let (case, report) = assert_recovered(&mut evaluator, 50_000, 50_105);
+    for (first_seed, seed) in [(50_000, 50_105), (60_000, 60_069), (50_000, 50_087)] {
+        let (case, report) = assert_recovered(&mut evaluator, first_seed, seed);
+        assert_eq!(case.noise, 0.0);
+        assert!(report.warnings.is_empty(), "{seed}: {:?}", report.warnings);
+        assert!(
+            report.points.polish.is_some(),
+            "{seed}: {:?}",
+            report.points
+        );
+        assert!(
+            report.quality.median_distance < 1e-6 * report.fitted.0.size(),
+            "{seed}: {:?}",
+            report.quality
+        );
+        let without_polish = FitOptions {
+            polish_points: 0,
+            ..view_options(seed, &case, true)
+        };
+        let (recovered, report) = recovers(&mut evaluator, &case, &without_polish);
+        assert!(
+            !recovered,
+            "{seed} without the polish: {:?}",
+            report.fitted.0
+        );
+    }
+}
+
+/// Noise the cloud does not show is not modelled (`fit::NOISE_OVER_SCATTER`): a fit in
+/// a wrong basin of a noise-free view reads its distance from the points as noise, and
+/// the noise model would settle it there. The held-out noise-free view 60045 (no
+/// outliers) went through the model 13 times over its retries (7.8 s) and now is
+/// retried by least squares to rounding; its first fit alone is flagged and not
+/// modelled. A noisy view's fit (40088, 1% noise) is still modelled.
+#[test]
+fn noise_the_cloud_does_not_show_is_not_modelled() {
+    let mut evaluator = CpuEvaluator::new();
+    let (case, report) = assert_recovered(&mut evaluator, 60_000, 60_045);
     assert_eq!(case.noise, 0.0);
-    assert!(report.warnings.is_empty(), "{:?}", report.warnings);
-    assert!(report.points.polish.is_some(), "{:?}", report.points);
-    let without_polish = FitOptions {
-        polish_points: 0,
-        ..view_options(50_105, &case, true)
-    };
-    let (recovered, report) = recovers(&mut evaluator, &case, &without_polish);
     assert!(
-        !recovered && warned_off_precise(&report),
-        "without the polish: recovered {recovered}, warnings {:?}",
+        !report.noise_modelled && report.warnings.is_empty(),
+        "{:?}",
         report.warnings
+    );
+    let first_only = FitOptions {
+        unseen_surface_retries: 0,
+        ..view_options(60_045, &case, true)
+    };
+    let (_, first) = recovers(&mut evaluator, &case, &first_only);
+    assert!(
+        first.noise_above_scatter && !first.noise_modelled,
+        "60045's first fit: {:?}",
+        first.quality
+    );
+    let (_, noisy) = assert_recovered(&mut evaluator, 40_000, 40_088);
+    assert!(
+        noisy.noise_modelled && !noisy.noise_above_scatter,
+        "{:?}",
+        noisy.quality
     );
 }
 
@@ -1078,9 +1133,12 @@ fn the_visible_surface_of_the_true_shape_is_covered_and_a_grown_ones_is_not() {
 
 /// A single view whose first fit leaves its visible surface uncovered is fitted again
 /// with other samples (`FitOptions::unseen_surface_retries`). The suite's case 10063
-/// (noise-free single view): without retries a body twice too large, flagged; with them,
-/// the true shape and no warning. Over the suite's 30 noise-free single views at least 28
-/// must be recovered (measured when written: 29; 25 without retries).
+/// (noise-free single view): without retries a wrong body, flagged (twice too large and
+/// uncovered until the twenty-fourth session; since the noise model no longer runs on
+/// noise the cloud does not show, the least-squares fit, off the precise cloud); with
+/// them, the true shape and no warning. Over the suite's 30 noise-free single views at least 28
+/// must be recovered (measured when written: 29; 25 without retries; 30 since the
+/// twenty-fourth session).
 #[test]
 fn an_uncovered_single_view_fit_is_retried_with_other_samples() {
     let mut evaluator = CpuEvaluator::new();
@@ -1097,7 +1155,7 @@ fn an_uncovered_single_view_fit_is_retried_with_other_samples() {
     assert!(
         once.warnings
             .iter()
-            .any(|w| w.starts_with("unseen surface")),
+            .any(|w| w.starts_with("unseen surface") || w.starts_with("off a precise")),
         "{:?}",
         once.warnings
     );

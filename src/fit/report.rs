@@ -90,6 +90,10 @@ pub struct FitReport {
     /// surface; the retries must still see it)
     #[serde(skip)]
     pub uncovered_before_model: bool,
+    /// the fit's noise was more than [`super::NOISE_OVER_SCATTER`] times the cloud's own
+    /// scatter, so the noise model did not run: a wrong basin's distance, not noise
+    #[serde(skip)]
+    pub noise_above_scatter: bool,
     /// the noise model refined this fit ([`Quality::noise_sigma`] is then the model's)
     #[serde(skip)]
     pub noise_modelled: bool,
