@@ -485,8 +485,9 @@ pub const MAX_UNSEEN_SURFACE_RETRIES: u64 = 16;
 /// often only because its random samples led the starts into a wrong basin. The same
 /// holds for a least-squares fit that the noise model then moved onto the points'
 /// surface: covered, but often still in the wrong basin (the retries following it too:
-/// 449 -> 452 of the suite's 540), and for a fit that stays off a precise cloud by more
-/// than rounding ([`precise_but_off`]). Such a cloud is fitted again with
+/// 449 -> 452 of the suite's 540), for a fit that stays off a precise cloud by more
+/// than rounding ([`precise_but_off`]), and for one whose noise the cloud's own scatter
+/// does not show ([`NOISE_OVER_SCATTER`]). Such a cloud is fitted again with
 /// `unseen_surface_retries` other seeds (one batch), and the fit that may stand
 /// ([`may_stand`]: covered, free space kept), the first among them, with the lowest
 /// median distance to all points stands; for a single view noisy enough for the noise
