@@ -881,6 +881,31 @@ fn a_precise_misfit_is_refined_on_all_its_points() {
     }
 }
 
+/// A fit still off a precise cloud after its polish is made again about its own x and y
+/// axes as the hole axis (`fit::refit_precise_misfits_on_other_axes`): the noise-free
+/// view 150099 (fresh seed set 150000, no outliers) ended all 16 of its retries and the
+/// polish with its hole axis 90 degrees off, sizes 76% off, warned off its precise
+/// cloud; the true axis lay along the fit's x axis, and about it the fit comes within the
+/// suite's tolerances, unwarned. Without retries (which also turns this off) it stays
+/// wrong.
+#[test]
+fn a_precise_misfit_is_refitted_about_its_other_axes() {
+    let mut evaluator = CpuEvaluator::new();
+    let (case, report) = assert_recovered(&mut evaluator, 150_000, 150_099);
+    assert_eq!((case.noise, case.outlier_fraction), (0.0, 0.0));
+    assert!(!warned_off_precise(&report), "{:?}", report.warnings);
+    let without_retries = FitOptions {
+        unseen_surface_retries: 0,
+        ..view_options(150_099, &case, true)
+    };
+    let (recovered, report) = recovers(&mut evaluator, &case, &without_retries);
+    assert!(
+        !recovered && warned_off_precise(&report),
+        "without retries: recovered {recovered}, warnings {:?}",
+        report.warnings
+    );
+}
+
 /// Noise the cloud does not show is not modelled (`fit::NOISE_OVER_SCATTER`): a fit in
 /// a wrong basin of a noise-free view reads its distance from the points as noise, and
 /// the noise model would settle it there. The held-out noise-free view 60045 (no

@@ -406,6 +406,7 @@ pub fn fit_batch(
     let retried = retry_unseen_surfaces(evaluator, clouds, &scatters, &mut results)?;
     retry_lasting_misfits(evaluator, clouds, &scatters, &retried, &mut results)?;
     polish_precise_misfits(evaluator, clouds, &mut results)?;
+    refit_precise_misfits_on_other_axes(evaluator, clouds, &scatters, &mut results)?;
     polish_on_more_points(evaluator, clouds, &mut results);
     warn_off_scatter(clouds, &scatters, &mut results);
     scatters.charge(&mut results);
@@ -789,6 +790,70 @@ fn pinned_at_eps_bound(options: &FitOptions, r: &FitReport) -> bool {
         && [shape.eps1, shape.eps2]
             .iter()
             .any(|&e| e > options.eps_max - EPS_BOUND_MARGIN)
+}
+
+/// A fit still off a precise cloud after its polish ([`precise_but_off`]) may have taken
+/// one of the object's other axes of symmetry for the hole axis: the noise-free view
+/// 150099 (fresh seed set 150000) ended every retry with its hole axis 90 degrees off,
+/// the true axis along its own x axis to 1e-4, and with that axis given it comes to
+/// rounding. So such a fit is made again with its x axis, and with its y axis, as the
+/// known hole axis (one batch, the whole fit), and the refit with the lowest median
+/// distance that may stand where the fit did replaces it where it brings the points
+/// closer. Not where the caller gave the axis or chose the paper's method.
+fn refit_precise_misfits_on_other_axes(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+    scatters: &Scatters,
+    results: &mut [Result<FitReport, FitError>],
+) -> Result<(), FitError> {
+    let listed: Vec<(usize, [FitOptions; 2])> = results
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            let r = r.as_ref().ok()?;
+            let options = clouds[i].1;
+            (r.method == Method::Default
+                && options.known_axis.is_none()
+                && options.unseen_surface_retries > 0
+                && precise_but_off(r, || scatters.of(clouds, i)))
+            .then(|| {
+                let turned = |axis: DVec3| FitOptions {
+                    known_axis: Some(r.fitted.1.rotation * axis),
+                    ..options.clone()
+                };
+                (i, [turned(DVec3::X), turned(DVec3::Y)])
+            })
+        })
+        .collect();
+    if listed.is_empty() {
+        return Ok(());
+    }
+    let start = Instant::now();
+    let batch: Vec<(&[DVec3], &FitOptions)> = listed
+        .iter()
+        .flat_map(|(i, options)| options.iter().map(|o| (clouds[*i].0, o)))
+        .collect();
+    let refits = fit_batch(evaluator, &batch)?;
+    for ((i, _), pair) in listed.iter().zip(refits.chunks(2)) {
+        let current = results[*i].as_ref().expect("listed fits are fits");
+        let best = pair
+            .iter()
+            .filter_map(|r| r.as_ref().ok())
+            .filter(|r| may_stand(r) || !may_stand(current))
+            .min_by(|a, b| {
+                a.quality
+                    .median_distance
+                    .total_cmp(&b.quality.median_distance)
+            });
+        if let Some(best) = best
+            && best.quality.median_distance < current.quality.median_distance
+        {
+            let mut best = best.clone();
+            best.timing_ms.total = current.timing_ms.total + start.elapsed().as_secs_f64() * 1e3;
+            results[*i] = Ok(best);
+        }
+    }
+    Ok(())
 }
 
 /// The section scales of [`polish_precise_misfits`]'s further starts ([`scale_section`]).
