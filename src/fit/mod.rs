@@ -221,7 +221,7 @@ pub const LIKELIHOOD_VIEW_NOISE_RATIO: f64 = 0.02;
 /// noise the points do not show is the fit's distance from them, a wrong basin that the
 /// model would take for the sensor's noise and settle (at its finest grid, half a second
 /// to a second a fit on a thin ring). Such a fit is retried as an uncovered one is
-/// ([`retry_unseen_surfaces`], [`FitReport::noise_above_scatter`]). On the suite's first
+/// (`retry_unseen_surfaces`, [`FitReport::noise_above_scatter`]). On the suite's first
 /// fits (held-out seeds 40000-60000, 540 cases) the fits the model ran on read 0.8 to
 /// 2.26 times the scatter, the wrong basins on noise-free views 2.8 (50087) to 98; the
 /// noise-free view 60045 went through the model 13 times in its retries, 7.8 s, and now
@@ -390,6 +390,16 @@ pub fn fit(
 /// one batched evaluator call per solver iteration for all of them (one dispatch on the
 /// GPU), then the stage-2 finalists of every cloud likewise. Clouds whose options give
 /// different solver settings (method, priors, loss) go in separate lockstep groups.
+///
+/// After both stages, the checks of the finished fits, in this order (each acts only on
+/// the fits it names): `refit_without_inconsistent_viewpoints` (a fit that puts solid
+/// where the sensor saw through), `retry_across_line_of_sight` (a view without an open
+/// hole, perhaps a ring seen edge-on), `retry_unseen_surfaces` (other seeds for a fit
+/// whose visible surface is bare, that stays off a precise cloud or its scatter, or whose
+/// noise the cloud does not show), `retry_lasting_misfits` (more seeds where those
+/// leave it so), `polish_precise_misfits` (further starts at small loss scales),
+/// `refit_precise_misfits_on_other_axes`, `polish_on_more_points` (the noise model
+/// once more on all points) and `warn_off_scatter`.
 ///
 /// Each cloud gets the fit [`fit`] gives it alone (bit for bit on the CPU evaluator);
 /// its `timing_ms` is its group's, since the clouds share every evaluation. The outer
@@ -856,15 +866,15 @@ fn refit_precise_misfits_on_other_axes(
     Ok(())
 }
 
-/// The section scales of [`polish_precise_misfits`]'s further starts ([`scale_section`]).
+/// The section scales of `polish_precise_misfits`'s further starts (`scale_section`).
 pub const SECTION_SCALES: [f64; 7] = [0.6, 0.7, 0.8, 0.9, 1.1, 1.25, 1.5];
 
-/// The top-view roundness (eps2) of [`polish_precise_misfits`]'s further starts, each
+/// The top-view roundness (eps2) of `polish_precise_misfits`'s further starts, each
 /// in place of the fit's where it is more than 0.25 away.
 pub const TOP_VIEW_EPS2: [f64; 3] = [0.5, 1.0, 1.5];
 
 /// The Cauchy scales (normalised units: of the cloud's RMS radius) that
-/// [`polish_precise_misfits`] solves at in turn, each from where the last ended.
+/// `polish_precise_misfits` solves at in turn, each from where the last ended.
 pub const PRECISE_LOSS_SCALES: [f64; 5] = [1e-3, 3e-4, 1e-4, 3e-5, 1e-5];
 
 /// `candidate` with its section (a1, a2, a3) scaled by `k` about the same mean
