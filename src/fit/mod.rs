@@ -415,7 +415,7 @@ pub fn fit_batch(
     let scatters = Scatters::new(clouds);
     let retried = retry_unseen_surfaces(evaluator, clouds, &scatters, &mut results)?;
     retry_lasting_misfits(evaluator, clouds, &scatters, &retried, &mut results)?;
-    polish_precise_misfits(evaluator, clouds, &mut results)?;
+    polish_precise_misfits(evaluator, clouds, &scatters, &mut results)?;
     refit_precise_misfits_on_other_axes(evaluator, clouds, &scatters, &mut results)?;
     polish_on_more_points(evaluator, clouds, &mut results);
     warn_off_scatter(clouds, &scatters, &mut results);
@@ -846,24 +846,31 @@ fn refit_precise_misfits_on_other_axes(
     let refits = fit_batch(evaluator, &batch)?;
     for ((i, _), pair) in listed.iter().zip(refits.chunks(2)) {
         let current = results[*i].as_ref().expect("listed fits are fits");
-        let best = pair
+        let pair: Vec<FitReport> = pair
             .iter()
-            .filter_map(|r| r.as_ref().ok())
-            .filter(|r| may_stand(r) || !may_stand(current))
-            .min_by(|a, b| {
-                a.quality
-                    .median_distance
-                    .total_cmp(&b.quality.median_distance)
-            });
-        if let Some(best) = best
-            && best.quality.median_distance < current.quality.median_distance
-        {
+            .filter_map(|r| r.as_ref().ok().cloned())
+            .collect();
+        if let Some(best) = closer_standing(&pair, current) {
             let mut best = best.clone();
             best.timing_ms.total = current.timing_ms.total + start.elapsed().as_secs_f64() * 1e3;
             results[*i] = Ok(best);
         }
     }
     Ok(())
+}
+
+/// Of `candidates`, the one with the lowest median distance to the cloud that may stand
+/// ([`may_stand`]) where `fitted` did, if it brings the points closer than `fitted`.
+fn closer_standing<'a>(candidates: &'a [FitReport], fitted: &FitReport) -> Option<&'a FitReport> {
+    candidates
+        .iter()
+        .filter(|r| may_stand(r) || !may_stand(fitted))
+        .min_by(|a, b| {
+            a.quality
+                .median_distance
+                .total_cmp(&b.quality.median_distance)
+        })
+        .filter(|r| r.quality.median_distance < fitted.quality.median_distance)
 }
 
 /// The section scales of `polish_precise_misfits`'s further starts (`scale_section`).
@@ -909,9 +916,10 @@ fn scale_section(candidate: &Candidate, k: f64) -> Candidate {
 fn polish_precise_misfits(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
+    scatters: &Scatters,
     results: &mut [Result<FitReport, FitError>],
 ) -> Result<(), FitError> {
-    for (result, (cloud, options)) in results.iter_mut().zip(clouds) {
+    for (i, (result, (cloud, options))) in results.iter_mut().zip(clouds).enumerate() {
         let Ok(fitted) = result.as_ref() else {
             continue;
         };
@@ -924,16 +932,17 @@ fn polish_precise_misfits(
         {
             continue;
         }
+        if !PRECISE_MISFIT.contains(&relative)
+            && scatters
+                .of(clouds, i)
+                .is_none_or(|s| s / size >= PRECISE_MISFIT.end)
+        {
+            continue;
+        }
         let start = Instant::now();
         let Some(p) = prepare_polish(cloud, options) else {
             continue;
         };
-        if !PRECISE_MISFIT.contains(&relative)
-            && p.scatter()
-                .is_none_or(|s| s * p.norm.scale / size >= PRECISE_MISFIT.end)
-        {
-            continue;
-        }
         evaluator.set_point_sets_with_free_space(&[p.stage2_set()])?;
         let fit = p.norm.candidate(&fitted.fitted.0, &fitted.fitted.1);
         let starts: Vec<Candidate> = std::iter::once(fit)
@@ -970,7 +979,7 @@ fn polish_precise_misfits(
             iterations += solved.iter().map(|s| s.iterations).max().unwrap_or(0);
             solutions = solved.into_iter().map(|s| s.candidate).collect();
         }
-        let Some(polished) = solutions
+        let polished: Vec<FitReport> = solutions
             .iter()
             .map(|c| {
                 report(
@@ -982,19 +991,16 @@ fn polish_precise_misfits(
                     evaluator,
                 )
             })
-            .filter(|r| may_stand(r) || !may_stand(fitted))
-            .min_by(|a, b| {
-                a.quality
-                    .median_distance
-                    .total_cmp(&b.quality.median_distance)
-            })
-        else {
+            .collect();
+        let Some(polished) = closer_standing(&polished, fitted) else {
             continue;
         };
-        if polished.quality.median_distance >= fitted.quality.median_distance {
-            continue;
-        }
-        *result = Ok(polish_of(polished, fitted, p.stage2_pts.len(), start));
+        *result = Ok(polish_of(
+            polished.clone(),
+            fitted,
+            p.stage2_pts.len(),
+            start,
+        ));
     }
     Ok(())
 }
