@@ -968,26 +968,19 @@ fn a_fit_the_first_retries_leave_wrong_gets_more_seeds() {
 /// the further seeds: the held-out view 50035 (2% noise, 10% outliers) ended its first
 /// retries in a wrong basin with eps1 at 2 (sizes 37% off, a4 2.0 for 2.8), every point
 /// covered and no warning; of the further seeds the most likely under the noise model is
-/// right. A bound the caller narrowed is the caller's prior, so with eps up to 1.99 the
-/// fit stays pressed against it, wrong.
+/// right. Since the twenty-fifth session (the noise model's outliers spread over the
+/// cloud's own box) its first retries no longer end at the bound, and no case of eleven
+/// seed sets fails with the bound narrowed to 1.99 (which turns the further seeds off)
+/// and ends against it; so this test now holds 50035's fit within tolerance and off the
+/// bound, and the step stays for the fits that do end there.
 #[test]
 fn a_fit_pressed_against_an_eps_bound_is_retried() {
     let mut evaluator = CpuEvaluator::new();
-    let (case, report) = assert_recovered(&mut evaluator, 50_000, 50_035);
-    assert!(report.fitted.0.eps1 < 1.9 && report.fitted.0.eps2 < 1.9);
-    let narrowed = FitOptions {
-        eps_max: 1.99,
-        ..view_options(50_035, &case, true)
-    };
-    let (recovered, pressed) = recovers(&mut evaluator, &case, &narrowed);
-    let at_bound = [pressed.fitted.0.eps1, pressed.fitted.0.eps2]
-        .iter()
-        .any(|&e| e > 1.99 - supertoroid::fit::EPS_BOUND_MARGIN);
+    let (_, report) = assert_recovered(&mut evaluator, 50_000, 50_035);
     assert!(
-        !recovered && at_bound && pressed.warnings.iter().all(|w| !w.starts_with("unseen")),
-        "eps up to 1.99: recovered {recovered}, shape {:?}, warnings {:?}",
-        pressed.fitted.0,
-        pressed.warnings
+        report.fitted.0.eps1 < 1.9 && report.fitted.0.eps2 < 1.9,
+        "{:?}",
+        report.fitted.0
     );
 }
 
@@ -1317,21 +1310,23 @@ fn the_thorough_search_recovers_noisy_single_views() {
 }
 
 /// The noise model's polish on all of a cloud's points (`FitOptions::polish_points`): on
-/// the 1000-point sample, the single view 20176 (2% noise, 5% outliers) ends with sizes
-/// 13% off, and 20161 (2% noise, 10% outliers) in the other reading of its top view
-/// (sizes 51% off), which the sample's likelihood could not tell from the right one by
-/// the margin it needs; the full clouds 50110 (2% noise) and 60134 (2% noise, 10%
-/// outliers) end with eps 0.15-0.16 off. On all of their points the polish recovers all
-/// four; without it none is. (Single views, eighteenth session: 522 -> 530 of 540;
-/// full clouds, nineteenth: 704 -> 710 of 720 on eight seed sets.)
+/// the 1000-point sample, the single view 20050 (2% noise, 5% outliers) ends with eps
+/// 0.54 off, and 20161 (2% noise, 10% outliers) in the other reading of its top view
+/// (sizes 41% off), which the sample's likelihood could not tell from the right one by
+/// the margin it needs; the full clouds 50005 and 60167 (2% noise, 5% outliers) end with
+/// eps 0.17-0.22 off. On all of their points the polish recovers all four; without it
+/// none is. (Single views, eighteenth session: 522 -> 530 of 540; full clouds,
+/// nineteenth: 704 -> 710 of 720 on eight seed sets. Since the outliers' box of the
+/// twenty-fifth session, 20176, 50110 and 60134, this test's cases before, are
+/// recovered without the polish.)
 #[test]
 fn the_polish_on_all_points_recovers_noisy_fits() {
     let mut evaluator = CpuEvaluator::new();
     for (first_seed, seed) in [
-        (20_000u64, 20_176u64),
+        (20_000u64, 20_050u64),
         (20_000, 20_161),
-        (50_000, 50_110),
-        (60_000, 60_134),
+        (50_000, 50_005),
+        (60_000, 60_167),
     ] {
         let case = suite_case(first_seed, seed);
         let options = |polish_points| FitOptions {
