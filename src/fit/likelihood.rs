@@ -836,8 +836,8 @@ pub const COVER_SIGMAS: f64 = 3.0;
 
 /// Refines `start` (normalised units, a shape with a hole) on `points` from the noise
 /// estimate `sigma`, with the outlier share `outlier_weight` of the points spread over
-/// their box along their principal axes ([`outlier_volume`]). None when the start is not a shape this model covers (a4 <= 1)
-/// or the cloud is too small.
+/// their box along their principal axes (`outlier_volume`). None when the start is not a
+/// shape this model covers (a4 <= 1) or the cloud is too small.
 ///
 /// Levenberg-Marquardt on the BHHH Hessian (the outer product of the points' gradients,
 /// the Fisher information near the optimum): from a least-squares fit it converges in
