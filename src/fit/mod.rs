@@ -430,6 +430,7 @@ pub fn fit_batch(
     let scatters = Scatters::new(clouds);
     let retried = retry_unseen_surfaces(evaluator, clouds, &scatters, &mut results)?;
     retry_lasting_misfits(evaluator, clouds, &scatters, &retried, &mut results)?;
+    sweep_edge_on_axes(evaluator, clouds, &mut results)?;
     polish_precise_misfits(evaluator, clouds, &scatters, &mut results)?;
     refit_precise_misfits_on_other_axes(evaluator, clouds, &scatters, &mut results)?;
     polish_on_more_points(evaluator, clouds, &mut results);
@@ -456,6 +457,9 @@ enum StartSet {
     Usual,
     /// only the hole axes across the line of sight ([`starts::across_line_of_sight`])
     AcrossLineOfSight,
+    /// only the hole axes all round the plane across the line of sight
+    /// ([`starts::edge_on_sweep`])
+    EdgeOnSweep,
 }
 
 /// [`fit_batch_once`] from the given starts: None for a cloud that has none of them.
@@ -566,14 +570,29 @@ fn retry_unseen_surfaces(
                 r
             })
         });
-        if let Some(mut best) = best {
-            // the first fit's time, the retries' (one batch) and the rescue's are the
-            // caller's wait
-            best.timing_ms.total = spent + retry_start.elapsed().as_secs_f64() * 1e3;
-            results[i] = Ok(best);
-        }
+        // the first fit's time, the retries' (one batch) and the rescue's are the
+        // caller's wait, whether they replace the fit or not
+        charge_wait(&mut results[i], best, spent, retry_start);
     }
     Ok(uncovered)
+}
+
+/// A check's outcome for one cloud: `replacement` (when the check found a better fit) in
+/// place of the fit in `result`, which had taken `spent` ms before the check began at
+/// `start`. The check's time is the caller's wait whether it replaced the fit or not.
+fn charge_wait(
+    result: &mut Result<FitReport, FitError>,
+    replacement: Option<FitReport>,
+    spent: f64,
+    start: Instant,
+) {
+    let total = spent + start.elapsed().as_secs_f64() * 1e3;
+    if let Some(replacement) = replacement {
+        *result = Ok(replacement);
+    }
+    if let Ok(r) = result {
+        r.timing_ms.total = total;
+    }
 }
 
 /// A single view's fit without an open hole ([`OPEN_HOLE`]) may be a ring seen edge-on
@@ -616,10 +635,8 @@ fn retry_across_line_of_sight(
         let current = results[i].as_ref().expect("listed fits are fits");
         let Some(Ok(refit)) = refit else { continue };
         let spent = current.timing_ms.total;
-        if let Some(mut best) = best_retry(&[(i, Ok(refit))], i, current, clouds[i]) {
-            best.timing_ms.total = spent + start.elapsed().as_secs_f64() * 1e3;
-            results[i] = Ok(best);
-        }
+        let best = best_retry(&[(i, Ok(refit))], i, current, clouds[i]);
+        charge_wait(&mut results[i], best, spent, start);
     }
     Ok(())
 }
@@ -759,12 +776,73 @@ fn retry_lasting_misfits(
         } else {
             best_retry(&retries, *i, current, clouds[*i])
         };
-        if let Some(mut best) = best {
-            best.timing_ms.total = current.timing_ms.total + start.elapsed().as_secs_f64() * 1e3;
-            results[*i] = Ok(best);
-        }
+        let spent = current.timing_ms.total;
+        charge_wait(&mut results[*i], best, spent, start);
     }
     Ok(())
+}
+
+/// A single view whose fit still leaves its visible surface bare after every retry
+/// ([`still_unseen`]) is fitted once more from hole axes all round the plane across the
+/// line of sight ([`starts::edge_on_sweep`]), and the refit replaces it where it may
+/// stand ([`best_retry`]). Such views are nearly always rings seen within 10 degrees of
+/// edge-on whose normal lines meet neither the hole axis nor the tube's tangent: 120029
+/// (normal lines' axis 83 degrees off the hole axis, the fit 58 degrees off, a
+/// superellipsoid five times too large) and 150154 (48 and 90 degrees) of the suite. Not
+/// where the caller gave the axis or turned the retries off.
+fn sweep_edge_on_axes(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+    results: &mut [Result<FitReport, FitError>],
+) -> Result<(), FitError> {
+    let listed: Vec<usize> = results
+        .iter()
+        .enumerate()
+        .filter(|(i, r)| {
+            let options = clouds[*i].1;
+            r.as_ref().is_ok_and(|r| {
+                r.method == Method::Default
+                    && options.known_axis.is_none()
+                    && options.unseen_surface_retries > 0
+                    && still_unseen(r)
+            })
+        })
+        .map(|(i, _)| i)
+        .collect();
+    if listed.is_empty() {
+        return Ok(());
+    }
+    let start = Instant::now();
+    let batch: Vec<(&[DVec3], &FitOptions)> = listed.iter().map(|&i| clouds[i]).collect();
+    let refits = fit_batch_from(evaluator, &batch, StartSet::EdgeOnSweep)?;
+    for (&i, refit) in listed.iter().zip(refits) {
+        let current = results[i].as_mut().expect("listed fits are fits");
+        let best = match refit {
+            Some(Ok(refit)) => best_retry(&[(i, Ok(refit.clone()))], i, current, clouds[i])
+                .or_else(|| less_unseen(&refit, current).then_some(refit)),
+            _ => None,
+        };
+        let spent = current.timing_ms.total;
+        charge_wait(&mut results[i], best, spent, start);
+    }
+    Ok(())
+}
+
+/// Of two single-view fits neither of which may stand ([`may_stand`]), whether `refit`
+/// is the better on both counts: more of its visible surface covered, no more of the
+/// sensor's free space taken. The views of [`sweep_edge_on_axes`] are seen so nearly
+/// edge-on that even their true surface has points on only 76% (120029) and 76%
+/// (150154) of what faces the sensor; their refits, within the suite's tolerances, cover
+/// 72% and 70%, their first fits 30% and 62%.
+fn less_unseen(refit: &FitReport, current: &FitReport) -> bool {
+    let (Some(new), Some(old)) = (
+        refit.quality.visible_coverage,
+        current.quality.visible_coverage,
+    ) else {
+        return false;
+    };
+    let taken = |r: &FitReport| r.free_space_violation.unwrap_or(0.0);
+    !may_stand(current) && new > old && taken(refit) <= taken(current)
 }
 
 /// A fit the first retries ([`retry_unseen_surfaces`]) leave farther than this many times
@@ -865,11 +943,9 @@ fn refit_precise_misfits_on_other_axes(
             .iter()
             .filter_map(|r| r.as_ref().ok().cloned())
             .collect();
-        if let Some(best) = closer_standing(&pair, current) {
-            let mut best = best.clone();
-            best.timing_ms.total = current.timing_ms.total + start.elapsed().as_secs_f64() * 1e3;
-            results[*i] = Ok(best);
-        }
+        let best = closer_standing(&pair, current).cloned();
+        let spent = current.timing_ms.total;
+        charge_wait(&mut results[*i], best, spent, start);
     }
     Ok(())
 }
@@ -1008,6 +1084,9 @@ fn polish_precise_misfits(
             })
             .collect();
         let Some(polished) = closer_standing(&polished, fitted) else {
+            // (the polish's time is the caller's wait all the same)
+            let spent = fitted.timing_ms.total;
+            charge_wait(result, None, spent, start);
             continue;
         };
         *result = Ok(polish_of(
@@ -1572,6 +1651,24 @@ fn prepare<'a>(
             }
         }
     }
+    if start_set == StartSet::EdgeOnSweep && o.known_axis.is_none() && !paper {
+        let viewpoint = o.viewpoint.map(|v| norm.point(v));
+        for axis in starts::edge_on_sweep(line.map(|(a, _)| a), viewpoint) {
+            // (a hint along the line of sight: the section's x axis faces the sensor)
+            let hint = viewpoint.map_or(DVec3::X, |v| -v);
+            let on_axis = starts::axis_point_for_direction(&axis_sample, &normals, axis)
+                .unwrap_or(DVec3::ZERO);
+            for a4 in [None, Some(1.3), Some(2.5)] {
+                across_starts.push(starts::start_on_axis_line(
+                    &axis_sample,
+                    axis,
+                    on_axis,
+                    hint,
+                    a4,
+                ));
+            }
+        }
+    }
     if paper {
         // x, y, z of the cloud's frame, centroid, a3 = 0.6 of the half-diagonal
         let (lo, hi) = stage1_pts
@@ -1691,7 +1788,7 @@ fn prepare<'a>(
         stage2_free,
         starts: match start_set {
             StartSet::Usual => starts,
-            StartSet::AcrossLineOfSight => across_starts,
+            StartSet::AcrossLineOfSight | StartSet::EdgeOnSweep => across_starts,
         },
         bounds,
         opts1,
@@ -2575,4 +2672,41 @@ fn distinct_basin(a: &Candidate, b: &Candidate) -> bool {
     let turn = x.y.atan2(x.x).rem_euclid(std::f64::consts::FRAC_PI_2);
     let turn = turn.min(std::f64::consts::FRAC_PI_2 - turn);
     turn > 20f64.to_radians()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::CpuEvaluator;
+    use std::time::Duration;
+
+    /// A check that found nothing better still charges its time to the fit (before the
+    /// twenty-sixth session it did not: the suite's view 90154 reported 0.6 s for a fit
+    /// that took 5 s, most of it in retries that did not replace it).
+    #[test]
+    fn a_check_that_replaces_nothing_still_charges_its_time() {
+        let case = ground_truth::make_case(7, false, 0.0, 0.0);
+        let mut evaluator = CpuEvaluator::new();
+        let fitted = fit(&mut evaluator, &case.points, &FitOptions::default()).unwrap();
+        let before = fitted.timing_ms.total;
+        let check_began = Instant::now() - Duration::from_millis(50);
+        let mut result = Ok(fitted.clone());
+        charge_wait(&mut result, None, before, check_began);
+        let kept = result.unwrap();
+        assert_eq!(kept.fitted, fitted.fitted, "the fit stays");
+        assert!(
+            kept.timing_ms.total >= before + 50.0,
+            "{:?}",
+            kept.timing_ms
+        );
+        // a replacement takes the fit's place with the whole wait
+        let mut replacement = fitted.clone();
+        replacement.fitted.0.a3 *= 2.0;
+        replacement.timing_ms.total = 1.0;
+        let mut result = Ok(fitted);
+        charge_wait(&mut result, Some(replacement.clone()), before, check_began);
+        let replaced = result.unwrap();
+        assert_eq!(replaced.fitted, replacement.fitted);
+        assert!(replaced.timing_ms.total >= before + 50.0);
+    }
 }
