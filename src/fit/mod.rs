@@ -433,6 +433,7 @@ pub fn fit_batch(
     sweep_edge_on_axes(evaluator, clouds, &mut results)?;
     polish_precise_misfits(evaluator, clouds, &scatters, &mut results)?;
     refit_precise_misfits_on_other_axes(evaluator, clouds, &scatters, &mut results)?;
+    rescue_barely_covered_closed_bodies(evaluator, clouds, &mut results);
     polish_on_more_points(evaluator, clouds, &mut results);
     warn_off_scatter(clouds, &scatters, &mut results);
     scatters.charge(&mut results);
@@ -948,6 +949,48 @@ fn refit_precise_misfits_on_other_axes(
         charge_wait(&mut results[*i], best, spent, start);
     }
     Ok(())
+}
+
+/// A single view fitted as a closed body (no open hole, a4 < 1) whose points only just
+/// cover its visible surface ([`MARGINAL_COVERAGE`]) is often a thin ring's view grown
+/// into a body several times its size: least squares prefers a thick body through a thin
+/// section's noisy points (see [`rescue_unseen_surface`]), and the noise model never ran
+/// on it (it needs a hole). The noise model's rescue runs on it as on an uncovered fit,
+/// and the rescued fit replaces it where it covers more of its visible surface. On the
+/// suite's fifteen seed sets (2700 cases) three fits ended so: 120160 (1% noise, 10%
+/// outliers, sizes 3 times too large, 78% covered) is recovered (100% covered), 130106
+/// (4.4 times) comes to 16% off, and 150099, a noise-free view, is not touched: it is
+/// refitted to rounding about its other axes first (this step runs after
+/// [`refit_precise_misfits_on_other_axes`]), and the rescue leaves a fit that sits on
+/// its points alone.
+fn rescue_barely_covered_closed_bodies(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+    results: &mut [Result<FitReport, FitError>],
+) {
+    for (result, (cloud, options)) in results.iter_mut().zip(clouds) {
+        let Ok(fitted) = result.as_ref() else {
+            continue;
+        };
+        let Some(covered) = fitted.quality.visible_coverage else {
+            continue;
+        };
+        if fitted.method != Method::Default
+            || fitted.fitted.0.a4 >= OPEN_HOLE
+            || !MARGINAL_COVERAGE.contains(&covered)
+        {
+            continue;
+        }
+        let start = Instant::now();
+        let spent = fitted.timing_ms.total;
+        let rescued = rescue_unseen_surface(evaluator, cloud, options, fitted)
+            .filter(|r| r.quality.visible_coverage.is_some_and(|c| c > covered))
+            .map(|mut r| {
+                r.timing_ms = fitted.timing_ms.clone();
+                r
+            });
+        charge_wait(result, rescued, spent, start);
+    }
 }
 
 /// Of `candidates`, the one with the lowest median distance to the cloud that may stand
