@@ -1072,6 +1072,27 @@ fn a_thin_rings_view_grown_into_a_closed_body_is_rescued() {
     );
 }
 
+/// The rescue also starts behind the skin the sensor saw (`fit::behind_the_skin`): the
+/// view 60175 (a thin ring seen 10 degrees off edge-on, 1% noise, 5% outliers) was
+/// fitted, with the right hole axis, as a closed body 8 times its size whose visible
+/// surface its points covered 14% of, and every start on the skin failed; it is
+/// recovered.
+#[test]
+fn a_ring_seen_from_the_side_is_rescued_from_behind_its_skin() {
+    let mut evaluator = CpuEvaluator::new();
+    let (case, report) = assert_recovered(&mut evaluator, 60_000, 60_175);
+    let camera = (case.viewpoint.unwrap() - case.pose.translation).normalize();
+    assert!(
+        camera.dot(case.pose.axis()).abs() < 0.2,
+        "seen from the side"
+    );
+    assert!(
+        report.quality.visible_coverage.unwrap() >= 0.75,
+        "{:?}",
+        report.quality
+    );
+}
+
 fn viewpoint_warnings(report: &FitReport) -> Vec<&String> {
     report
         .warnings
