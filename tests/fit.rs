@@ -1038,7 +1038,9 @@ fn an_edge_on_ring_is_refitted_across_the_line_of_sight() {
 /// replaces it. The views 120029 (2% noise) and 150154 (1% noise), seen 8 and 5 degrees
 /// off edge-on, had normal lines pointing 83 and 48 degrees off their hole axes; their
 /// fits were superellipsoids 58 and 90 degrees off (sizes 6.4 and 1.1 times off), and
-/// are recovered.
+/// are recovered. 150154's sweep also overrules the rescue: starting behind the skin
+/// along the first fit's wrong axis, the rescue found a covered fit 90 degrees off, far
+/// less likely than the sweep's.
 #[test]
 fn a_ring_seen_edge_on_whose_normal_lines_point_elsewhere_is_swept() {
     let mut evaluator = CpuEvaluator::new();

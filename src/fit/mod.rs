@@ -805,7 +805,7 @@ fn sweep_edge_on_axes(
                 r.method == Method::Default
                     && options.known_axis.is_none()
                     && options.unseen_surface_retries > 0
-                    && still_unseen(r)
+                    && (still_unseen(r) || r.rescued)
             })
         })
         .map(|(i, _)| i)
@@ -819,6 +819,9 @@ fn sweep_edge_on_axes(
     for (&i, refit) in listed.iter().zip(refits) {
         let current = results[i].as_mut().expect("listed fits are fits");
         let best = match refit {
+            Some(Ok(refit)) if current.rescued => {
+                more_likely_than_rescued(&refit, current, clouds[i]).then_some(refit)
+            }
             Some(Ok(refit)) => best_retry(&[(i, Ok(refit.clone()))], i, current, clouds[i])
                 .or_else(|| less_unseen(&refit, current).then_some(refit)),
             _ => None,
@@ -828,6 +831,29 @@ fn sweep_edge_on_axes(
     }
     Ok(())
 }
+
+/// Whether the sweep's `refit` of a view the noise model's rescue fitted (`rescued`) is
+/// more likely under the model, on a common sample ([`CommonSample`]), by
+/// [`SWEEP_OVER_RESCUE_MARGIN`] per point, covered or not. The rescue keeps the most
+/// likely of its starts that the points cover, all of them on the first fit's hole axis
+/// or behind its skin; where that axis is wrong, the covered one can be far less likely
+/// than a fit on the right axis that the points cover just under the bound: 150154's
+/// rescue (its first fit's axis 90 degrees off) stood at 89% covered and 0.49 per point,
+/// the sweep's fit within tolerance at 74% covered and -0.07, the truth's likelihood.
+fn more_likely_than_rescued(
+    refit: &FitReport,
+    rescued: &FitReport,
+    (cloud, options): (&[DVec3], &FitOptions),
+) -> bool {
+    let common = CommonSample::new(cloud, options);
+    common.negative_log_likelihood(refit) + SWEEP_OVER_RESCUE_MARGIN
+        < common.negative_log_likelihood(rescued)
+}
+
+/// See [`more_likely_than_rescued`]: the margin of the other reading of a single view's
+/// top view ([`DUAL_READING_MARGIN`]), for the same reason (the model is not exact on
+/// one-sided views).
+const SWEEP_OVER_RESCUE_MARGIN: f64 = DUAL_READING_MARGIN;
 
 /// Of two single-view fits neither of which may stand ([`may_stand`]), whether `refit`
 /// is the better on both counts: more of its visible surface covered, no more of the
@@ -1259,6 +1285,7 @@ fn polish_of(
         ..fitted.points.clone()
     };
     polished.uncovered_before_model = fitted.uncovered_before_model;
+    polished.rescued = fitted.rescued;
     polished.noise_above_scatter = fitted.noise_above_scatter;
     polished
 }
@@ -1944,6 +1971,7 @@ fn fit_group(
                 uncovered_before_model: *uncovered_before,
                 noise_above_scatter: *above_scatter,
                 other_reading_gap: model.and_then(|m| m.other_reading_gap),
+                rescued: false,
                 ..report(
                     p,
                     &best.candidate,
@@ -2376,14 +2404,16 @@ fn rescue_unseen_surface(
     if first_noise < LIKELIHOOD_VIEW_NOISE_RATIO * best.candidate.shape.thinnest_half_axis() {
         return None;
     }
-    Some(report(
+    let mut rescued = report(
         &p,
         &best.candidate,
         first.iterations.stage2 + best.iterations,
         Some(best.sigma),
         first.iterations.stage1,
         evaluator,
-    ))
+    );
+    rescued.rescued = true;
+    Some(rescued)
 }
 
 /// `start` (centred on the cloud's centroid, the origin of the normalised frame) moved
@@ -2721,6 +2751,7 @@ fn report(
         noise_above_scatter: false,
         noise_modelled: modelled_sigma.is_some(),
         other_reading_gap: None,
+        rescued: false,
     }
 }
 

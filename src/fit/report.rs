@@ -101,6 +101,10 @@ pub struct FitReport {
     /// the noise model, on the sample it was fitted to; none where it was not tried
     #[serde(skip)]
     pub other_reading_gap: Option<f64>,
+    /// the noise model's rescue of an uncovered single view made this fit (see
+    /// `rescue_unseen_surface` in `fit`)
+    #[serde(skip)]
+    pub rescued: bool,
 }
 
 /// Noise ([`Quality::noise_sigma`]) above this fraction of the fitted shape's smallest
