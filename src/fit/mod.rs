@@ -412,9 +412,12 @@ pub fn fit(
 /// hole, perhaps a ring seen edge-on), `retry_unseen_surfaces` (other seeds for a fit
 /// whose visible surface is bare, that stays off a precise cloud or its scatter, or whose
 /// noise the cloud does not show), `retry_lasting_misfits` (more seeds where those
-/// leave it so), `polish_precise_misfits` (further starts at small loss scales),
-/// `refit_precise_misfits_on_other_axes`, `polish_on_more_points` (the noise model
-/// once more on all points) and `warn_off_scatter`.
+/// leave it so), `sweep_edge_on_axes` (hole axes all round the plane across the line
+/// of sight for a view still uncovered or rescued), `polish_precise_misfits` (further
+/// starts at small loss scales), `refit_precise_misfits_on_other_axes`,
+/// `rescue_barely_covered_closed_bodies`, `polish_on_more_points` (the noise model
+/// once more on all points) and `warn_off_scatter`. Each check's time is charged to the
+/// fits it looked at, whether it replaced them or not (`charge_wait`).
 ///
 /// Each cloud gets the fit [`fit`] gives it alone (bit for bit on the CPU evaluator);
 /// its `timing_ms` is its group's, since the clouds share every evaluation. The outer
@@ -786,11 +789,13 @@ fn retry_lasting_misfits(
 /// A single view whose fit still leaves its visible surface bare after every retry
 /// ([`still_unseen`]) is fitted once more from hole axes all round the plane across the
 /// line of sight ([`starts::edge_on_sweep`]), and the refit replaces it where it may
-/// stand ([`best_retry`]). Such views are nearly always rings seen within 10 degrees of
-/// edge-on whose normal lines meet neither the hole axis nor the tube's tangent: 120029
-/// (normal lines' axis 83 degrees off the hole axis, the fit 58 degrees off, a
-/// superellipsoid five times too large) and 150154 (48 and 90 degrees) of the suite. Not
-/// where the caller gave the axis or turned the retries off.
+/// stand ([`best_retry`]) or, where neither may, covers more ([`less_unseen`]). So is a
+/// fit the noise model's rescue made, whose starts all lie on the first fit's hole axis
+/// ([`more_likely_than_rescued`]). Such views are nearly always rings seen within 10
+/// degrees of edge-on whose normal lines meet neither the hole axis nor the tube's
+/// tangent: 120029 (normal lines' axis 83 degrees off the hole axis, the fit 58 degrees
+/// off, a superellipsoid five times too large) and 150154 (48 and 90 degrees) of the
+/// suite. Not where the caller gave the axis or turned the retries off.
 fn sweep_edge_on_axes(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
