@@ -16,7 +16,7 @@
 //!
 //! Seen from a viewpoint (a single view), the points cover only what the sensor saw, at a
 //! density of cos(incidence) / range² per unit area: dA above becomes that density times
-//! dA over the visible surface (a z-buffer of the grid's mesh, [`visibility`], found once
+//! dA over the visible surface (a z-buffer of the grid's mesh, `visibility`, found once
 //! per evaluation and held for its derivatives). Without it the model would shrink the
 //! unseen side to raise the density on the seen one.
 //!
@@ -34,7 +34,7 @@
 //! it would cost time for nothing. Measured on the ground-truth suite (540 cases, seeds
 //! 10000, 20000, 30000): full clouds 228 -> 265 of 270 within tolerance, single views
 //! 139 -> 176; the fits it runs on take 20-150 ms more (see the README). With the view
-//! model corrected (back faces culled, grazing faces kept: [`visibility`]; the pose
+//! model corrected (back faces culled, grazing faces kept: `visibility`; the pose
 //! moving the view weights in the gradient) and the kernel cut at 4 sigmas instead of
 //! 3.5 ([`CUTOFF`]), 268 and 238 (with the rescue and retries of `fit`).
 

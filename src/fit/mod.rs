@@ -724,8 +724,8 @@ fn best_retry(
 }
 
 /// Retries in all, at most, of a fit that stays off a precise cloud
-/// ([`precise_but_off`]): where the first [`UNSEEN_SURFACE_RETRIES`] leave it there,
-/// [`retry_lasting_misfits`] goes on up to this many. On the suite, 30051 and 30123 (sizes
+/// (`precise_but_off`): where the first [`UNSEEN_SURFACE_RETRIES`] leave it there,
+/// `retry_lasting_misfits` goes on up to this many. On the suite, 30051 and 30123 (sizes
 /// 240% and 14% off after 3 retries, still 146% and 14% after 8) were recovered to
 /// rounding by 16, each fit taking about 400 ms instead of 90.
 pub const PRECISE_MISFIT_RETRIES: u64 = MAX_UNSEEN_SURFACE_RETRIES;
@@ -877,7 +877,7 @@ fn less_unseen(refit: &FitReport, current: &FitReport) -> bool {
     !may_stand(current) && new > old && taken(refit) <= taken(current)
 }
 
-/// A fit the first retries ([`retry_unseen_surfaces`]) leave farther than this many times
+/// A fit the first retries (`retry_unseen_surfaces`) leave farther than this many times
 /// its cloud's scatter from its points ([`scatter::local_scatter`]; a finished fit is
 /// warned at [`MISFIT_OVER_SCATTER`]) gets the further seeds. The noisy single views of
 /// the suite's right fits sit within 2.2 times their scatter; 40088 (1% noise, 10%
@@ -1298,7 +1298,7 @@ fn polish_of(
 /// A cloud that lies on its surface to a fraction of a per mille (a CAD model's, a
 /// precise scanner's) and a fit that still leaves a median distance well above rounding
 /// is in the wrong basin: the truth of such a cloud fits it to rounding. Measured on
-/// the suite's 180 noise-free clouds after the rounds of [`refine_robustly`], before
+/// the suite's 180 noise-free clouds after the rounds of `refine_robustly`, before
 /// any retry (single views told their camera): the fits within tolerance left median
 /// distances below 4e-6 of the size, the failed ones 1e-4 to 4e-4 (one within
 /// tolerance, 1.7e-3, was 9% off in size); the 1%-noise clouds leave 7e-3 and more.
@@ -1352,7 +1352,7 @@ fn warn_off_scatter(
     }
 }
 
-/// How the warning of [`warn_off_scatter`] begins.
+/// How the warning of `warn_off_scatter` begins.
 pub const OFF_ITS_POINTS_WARNING: &str = "off its points";
 
 /// Each cloud's [`scatter::local_scatter`], measured the first time a check asks for it
@@ -1413,7 +1413,7 @@ fn searched_thoroughly(options: &FitOptions, r: &FitReport) -> bool {
 }
 
 /// A noisy single view's fit with this share of its visible surface covered by points
-/// ([`coverage`]) is searched thoroughly ([`searched_thoroughly`]): enough to stand, but
+/// ([`coverage`]) is searched thoroughly (`searched_thoroughly`): enough to stand, but
 /// where a wrong basin's fits sit. On the suite's single views (eleven seed sets, 990
 /// views) 28 fits ended in this band and 5 of them wrong against 30 of the 950 above it;
 /// the thorough search recovered two of the noisy ones, 40121 (a giant ring through the
@@ -2367,7 +2367,7 @@ const DUAL_MIN_ROUNDNESS_GAP: f64 = 0.07;
 /// fit after this many iterations.
 const DUAL_FIRST_ITERATIONS: usize = 8;
 
-/// The a4 of the collapsed starts of [`rescue_unseen_surface`]: a small, a middling and
+/// The a4 of the collapsed starts of `rescue_unseen_surface`: a small, a middling and
 /// a wide hole (the suite's a4 is in [1.2, 3]).
 pub const RESCUE_A4: [f64; 3] = [1.3, 2.0, 3.0];
 /// The rescue refines every start this many iterations, and only the [`RESCUE_KEPT`]

@@ -191,7 +191,7 @@ pub(super) fn misfit_warning(shape: &Shape, quality: &Quality) -> Option<String>
         })
 }
 
-/// The largest median distance (share of the size) that [`misfit_warning`] warns at
+/// The largest median distance (share of the size) that `misfit_warning` warns at
 /// (the retries of `fit` look up to [`super::PRECISE_MISFIT`]'s end, 3e-3: one right fit
 /// 9% off in size sits at 1.8e-3).
 pub const PRECISE_MISFIT_WARNING: f64 = 1e-3;
