@@ -566,7 +566,6 @@ fn retry_unseen_surfaces(
     let retries = fit_retries(evaluator, clouds, &listed)?;
     for &i in &uncovered {
         let first = results[i].as_ref().expect("uncovered fits are fits");
-        let spent: f64 = first.timing_ms.total;
         let (cloud, cloud_options) = clouds[i];
         let best = best_retry(&retries, i, first, clouds[i]).or_else(|| {
             rescue_unseen_surface(evaluator, cloud, cloud_options, first).map(|mut r| {
@@ -576,21 +575,23 @@ fn retry_unseen_surfaces(
         });
         // the first fit's time, the retries' (one batch) and the rescue's are the
         // caller's wait, whether they replace the fit or not
-        charge_wait(&mut results[i], best, spent, retry_start);
+        charge_wait(&mut results[i], best, retry_start);
     }
     Ok(uncovered)
 }
 
 /// A check's outcome for one cloud: `replacement` (when the check found a better fit) in
-/// place of the fit in `result`, which had taken `spent` ms before the check began at
-/// `start`. The check's time is the caller's wait whether it replaced the fit or not.
+/// place of the fit in `result`, whose total time grows by the check's since `start`.
+/// The check's time is the caller's wait whether it replaced the fit or not.
 fn charge_wait(
     result: &mut Result<FitReport, FitError>,
     replacement: Option<FitReport>,
-    spent: f64,
     start: Instant,
 ) {
-    let total = spent + start.elapsed().as_secs_f64() * 1e3;
+    let Ok(current) = result.as_ref() else {
+        return;
+    };
+    let total = current.timing_ms.total + start.elapsed().as_secs_f64() * 1e3;
     if let Some(replacement) = replacement {
         *result = Ok(replacement);
     }
@@ -638,9 +639,8 @@ fn retry_across_line_of_sight(
     for (&i, refit) in listed.iter().zip(refits) {
         let current = results[i].as_ref().expect("listed fits are fits");
         let Some(Ok(refit)) = refit else { continue };
-        let spent = current.timing_ms.total;
         let best = best_retry(&[(i, Ok(refit))], i, current, clouds[i]);
-        charge_wait(&mut results[i], best, spent, start);
+        charge_wait(&mut results[i], best, start);
     }
     Ok(())
 }
@@ -780,8 +780,7 @@ fn retry_lasting_misfits(
         } else {
             best_retry(&retries, *i, current, clouds[*i])
         };
-        let spent = current.timing_ms.total;
-        charge_wait(&mut results[*i], best, spent, start);
+        charge_wait(&mut results[*i], best, start);
     }
     Ok(())
 }
@@ -831,8 +830,7 @@ fn sweep_edge_on_axes(
                 .or_else(|| less_unseen(&refit, current).then_some(refit)),
             _ => None,
         };
-        let spent = current.timing_ms.total;
-        charge_wait(&mut results[i], best, spent, start);
+        charge_wait(&mut results[i], best, start);
     }
     Ok(())
 }
@@ -976,8 +974,7 @@ fn refit_precise_misfits_on_other_axes(
             .filter_map(|r| r.as_ref().ok().cloned())
             .collect();
         let best = closer_standing(&pair, current).cloned();
-        let spent = current.timing_ms.total;
-        charge_wait(&mut results[*i], best, spent, start);
+        charge_wait(&mut results[*i], best, start);
     }
     Ok(())
 }
@@ -1013,14 +1010,13 @@ fn rescue_barely_covered_closed_bodies(
             continue;
         }
         let start = Instant::now();
-        let spent = fitted.timing_ms.total;
         let rescued = rescue_unseen_surface(evaluator, cloud, options, fitted)
             .filter(|r| r.quality.visible_coverage.is_some_and(|c| c > covered))
             .map(|mut r| {
                 r.timing_ms = fitted.timing_ms.clone();
                 r
             });
-        charge_wait(result, rescued, spent, start);
+        charge_wait(result, rescued, start);
     }
 }
 
@@ -1159,8 +1155,7 @@ fn polish_precise_misfits(
             .collect();
         let Some(polished) = closer_standing(&polished, fitted) else {
             // (the polish's time is the caller's wait all the same)
-            let spent = fitted.timing_ms.total;
-            charge_wait(result, None, spent, start);
+            charge_wait(result, None, start);
             continue;
         };
         *result = Ok(polish_of(
@@ -2797,7 +2792,7 @@ mod tests {
         let before = fitted.timing_ms.total;
         let check_began = Instant::now() - Duration::from_millis(50);
         let mut result = Ok(fitted.clone());
-        charge_wait(&mut result, None, before, check_began);
+        charge_wait(&mut result, None, check_began);
         let kept = result.unwrap();
         assert_eq!(kept.fitted, fitted.fitted, "the fit stays");
         assert!(
@@ -2810,7 +2805,7 @@ mod tests {
         replacement.fitted.0.a3 *= 2.0;
         replacement.timing_ms.total = 1.0;
         let mut result = Ok(fitted);
-        charge_wait(&mut result, Some(replacement.clone()), before, check_began);
+        charge_wait(&mut result, Some(replacement.clone()), check_began);
         let replaced = result.unwrap();
         assert_eq!(replaced.fitted, replacement.fitted);
         assert!(replaced.timing_ms.total >= before + 50.0);
