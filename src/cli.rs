@@ -118,8 +118,10 @@ pub enum BenchCommand {
     Synthetic {
         #[arg(long, default_value_t = 180)]
         cases: usize,
-        #[arg(long, default_value_t = crate::bench::synthetic::DEFAULT_SEED)]
-        seed: u64,
+        /// first seed of a set of --cases cases; a comma-separated list runs each set and
+        /// reports them together (e.g. 10000,20000,30000)
+        #[arg(long, value_delimiter = ',', default_values_t = [crate::bench::synthetic::DEFAULT_SEED])]
+        seed: Vec<u64>,
         /// do not tell the fit where the camera of a single-view case was (by default it
         /// gets the camera's position, as a depth frame gives it)
         #[arg(long)]
@@ -608,7 +610,7 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         } => {
             let r = crate::bench::synthetic::run(
                 *cases,
-                *seed,
+                seed,
                 !*no_viewpoint,
                 backend,
                 &options,

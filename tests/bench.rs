@@ -109,6 +109,54 @@ fn bench_paper_writes_the_table_with_every_field() {
 }
 
 #[test]
+fn bench_synthetic_runs_several_seed_sets_as_one_report() {
+    let out = out_dir("synthetic-sets");
+    let v = bench(
+        &[
+            "synthetic",
+            "--cases",
+            "2",
+            "--seed",
+            "10000,20000",
+            "--backend",
+            "cpu",
+        ],
+        &out,
+        "synthetic",
+    );
+    // each set's cases from its own first seed, in the categories of their place in it
+    let cases = v["cases"].as_array().unwrap();
+    let seeds: Vec<u64> = cases.iter().map(|c| c["seed"].as_u64().unwrap()).collect();
+    assert_eq!(seeds, [10000, 10001, 20000, 20001]);
+    assert_eq!(cases[0]["noise"], cases[2]["noise"]);
+    assert_eq!(cases[1]["noise"], cases[3]["noise"]);
+    let sets = v["sets"].as_array().unwrap();
+    assert_eq!(sets.len(), 2);
+    let md = std::fs::read_to_string(out.join("synthetic.md")).unwrap();
+    for (k, set) in sets.iter().enumerate() {
+        assert_eq!(set["seed"].as_u64(), Some(seeds[2 * k]));
+        assert_eq!(set["cases"].as_u64(), Some(2));
+        let successes = cases[2 * k..2 * k + 2]
+            .iter()
+            .filter(|c| c["success"] == true)
+            .count();
+        assert_eq!(set["successes"].as_u64(), Some(successes as u64));
+        let row = format!("| {} | 2 | {successes}/2 ", seeds[2 * k]);
+        assert!(md.contains(&row), "{row} not in {md}");
+    }
+    // the overall rate lies inside its interval, which lies inside [0, 1]
+    let rate = v["overall_rate"].as_f64().unwrap();
+    let interval: Vec<f64> = v["overall_interval"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert!(0.0 <= interval[0] && interval[0] <= rate && rate <= interval[1] && interval[1] <= 1.0);
+    assert!(md.contains("95% interval"), "{md}");
+}
+
+#[test]
 fn bench_synthetic_and_scaling_write_every_field() {
     let out = out_dir("synthetic");
     let v = bench(
@@ -129,7 +177,10 @@ fn bench_synthetic_and_scaling_write_every_field() {
         &[
             "machine",
             "backend",
+            "sets",
             "overall_rate",
+            "overall_interval",
+            "partial_with_outliers_interval",
             "full_rate",
             "partial_rate",
             "partial_with_outliers_rate",

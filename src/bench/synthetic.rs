@@ -1,7 +1,9 @@
-//! `bench synthetic`: the ground-truth suite of issue 4. Case i (seed `seed + i`) falls in
-//! category i mod 18: full or single-view partial cloud x noise 0, 1, 2% of the size x
-//! outliers 0, 5, 10%. Success is `ground_truth::Errors::success` (centre 5% of size,
-//! axis 5 degrees, sizes and a4 10%, eps 0.15, up to the symmetries).
+//! `bench synthetic`: the ground-truth suite of issue 4. Case i of a set (seed `seed + i`)
+//! falls in category i mod 18: full or single-view partial cloud x noise 0, 1, 2% of the
+//! size x outliers 0, 5, 10%. Success is `ground_truth::Errors::success` (centre 5% of
+//! size, axis 5 degrees, sizes and a4 10%, eps 0.15, up to the symmetries). Several sets
+//! (first seeds) run as one report, with each set's success and 95% intervals for the
+//! rates: a set of 180 cases tells 98% from 99% only loosely.
 
 use super::{Machine, Report, Stats};
 use crate::eval::{Backend, make_evaluator};
@@ -93,10 +95,16 @@ pub struct SyntheticReport {
     pub viewpoint_given: bool,
     pub cases: Vec<Case>,
     pub categories: Vec<Category>,
+    /// each seed set's successes, in the order given
+    pub sets: Vec<SeedSet>,
     pub overall_rate: f64,
+    /// 95% Wilson score interval of `overall_rate` (the cases as independent trials)
+    pub overall_interval: [f64; 2],
     pub full_rate: f64,
     pub partial_rate: f64,
     pub partial_with_outliers_rate: f64,
+    /// 95% Wilson score interval of `partial_with_outliers_rate`
+    pub partial_with_outliers_interval: [f64; 2],
     /// what an efficient estimator would reach (means of the cases' `attainable`): the
     /// ceiling that the data themselves set, overall and on partial clouds with outliers
     pub attainable_overall_rate: f64,
@@ -114,6 +122,36 @@ pub struct SyntheticReport {
     pub by_warning: Vec<Band>,
     /// pictures of failed cases (paths relative to the report)
     pub pictures: Vec<String>,
+}
+
+/// One seed set of the suite: its first seed, cases and successes.
+#[derive(Clone, Debug, Serialize)]
+pub struct SeedSet {
+    pub seed: u64,
+    pub cases: usize,
+    pub successes: usize,
+}
+
+/// The 95% Wilson score interval of a success rate of `successes` in `trials`
+/// independent trials (Wilson 1927): unlike the normal approximation it stays inside
+/// [0, 1] and holds near rates of 0 or 1, where the suite's rates sit. [0, 1] for no
+/// trials.
+pub fn wilson_interval(successes: usize, trials: usize) -> [f64; 2] {
+    if trials == 0 {
+        return [0.0, 1.0];
+    }
+    const Z: f64 = 1.959_963_984_540_054;
+    let n = trials as f64;
+    let p = successes as f64 / n;
+    let z2 = Z * Z;
+    let centre = (p + z2 / (2.0 * n)) / (1.0 + z2 / n);
+    let half = Z * (p * (1.0 - p) / n + z2 / (4.0 * n * n)).sqrt() / (1.0 + z2 / n);
+    [(centre - half).max(0.0), (centre + half).min(1.0)]
+}
+
+fn interval<'a>(cases: impl Iterator<Item = &'a Case>) -> [f64; 2] {
+    let (n, ok) = cases.fold((0, 0), |(n, ok), c| (n + 1, ok + c.success as usize));
+    wilson_interval(ok, n)
 }
 
 fn error_stats(cases: &[&Case]) -> ErrorStats {
@@ -150,11 +188,12 @@ fn pose_rate(cases: &[&Case]) -> f64 {
     right as f64 / cases.len().max(1) as f64
 }
 
-/// With `render`, draws up to six failed cases (cloud and fit; the truth is in the CSV).
-/// With `use_viewpoint`, a single-view case's fit is told where its camera was.
+/// Runs `cases` cases from each first seed in `seeds`. With `render`, draws up to six
+/// failed cases (cloud and fit; the truth is in the CSV). With `use_viewpoint`, a
+/// single-view case's fit is told where its camera was.
 pub fn run(
     cases: usize,
-    seed: u64,
+    seeds: &[u64],
     use_viewpoint: bool,
     backend: Backend,
     base: &FitOptions,
@@ -163,11 +202,14 @@ pub fn run(
     if cases == 0 {
         return Err("--cases must be at least 1".into());
     }
+    if seeds.is_empty() {
+        return Err("--seed needs at least one seed".into());
+    }
     let mut evaluator = make_evaluator(backend, base.stage2_points).map_err(|e| e.to_string())?;
-    let bar = super::progress(cases as u64, "ground-truth suite");
-    let mut out = Vec::with_capacity(cases);
+    let bar = super::progress((cases * seeds.len()) as u64, "ground-truth suite");
+    let mut out = Vec::with_capacity(cases * seeds.len());
     let mut pictures = Vec::new();
-    for i in 0..cases {
+    for (seed, i) in seeds.iter().flat_map(|&s| (0..cases).map(move |i| (s, i))) {
         let (partial, noise, outliers) = category(i);
         let case_seed = seed + i as u64;
         let case = make_case(case_seed, partial, noise, outliers);
@@ -238,14 +280,31 @@ pub fn run(
     let full: Vec<&Case> = out.iter().filter(|c| !c.partial).collect();
     let partial: Vec<&Case> = out.iter().filter(|c| c.partial).collect();
     let (by_noise_ratio, by_warning) = bands(&out);
+    let sets = seeds
+        .iter()
+        .enumerate()
+        .map(|(k, &seed)| SeedSet {
+            seed,
+            cases,
+            successes: out[k * cases..(k + 1) * cases]
+                .iter()
+                .filter(|c| c.success)
+                .count(),
+        })
+        .collect();
     Ok(SyntheticReport {
         machine: Machine::probe(),
         backend: evaluator.device_name(),
         viewpoint_given: use_viewpoint,
+        sets,
         overall_rate: rate(out.iter()),
+        overall_interval: interval(out.iter()),
         full_rate: rate(full.iter().copied()),
         partial_rate: rate(partial.iter().copied()),
         partial_with_outliers_rate: rate(partial.iter().copied().filter(|c| c.outliers > 0.0)),
+        partial_with_outliers_interval: interval(
+            partial.iter().copied().filter(|c| c.outliers > 0.0),
+        ),
         attainable_overall_rate: mean_attainable(out.iter()),
         attainable_partial_with_outliers_rate: mean_attainable(
             partial.iter().copied().filter(|c| c.outliers > 0.0),
@@ -377,7 +436,7 @@ impl Report for SyntheticReport {
         let mut md = String::from("# Ground-truth suite\n\n");
         md += &self.machine.markdown();
         md += &format!(
-            "Evaluator: {}. {} cases (single views {}). Success: overall {:.1}%, full clouds {:.1}%, single-view partial {:.1}%, partial with outliers {:.1}%.\n\n",
+            "Evaluator: {}. {} cases (single views {}). Success: overall {:.1}% (95% interval {:.1}-{:.1}%), full clouds {:.1}%, single-view partial {:.1}%, partial with outliers {:.1}% ({:.1}-{:.1}%).\n\n",
             self.backend,
             self.cases.len(),
             if self.viewpoint_given {
@@ -386,10 +445,28 @@ impl Report for SyntheticReport {
                 "without the camera's position"
             },
             100.0 * self.overall_rate,
+            100.0 * self.overall_interval[0],
+            100.0 * self.overall_interval[1],
             100.0 * self.full_rate,
             100.0 * self.partial_rate,
-            100.0 * self.partial_with_outliers_rate
+            100.0 * self.partial_with_outliers_rate,
+            100.0 * self.partial_with_outliers_interval[0],
+            100.0 * self.partial_with_outliers_interval[1]
         );
+        if self.sets.len() > 1 {
+            md += "| seed set | cases | success |\n|---:|---:|---:|\n";
+            for set in &self.sets {
+                md += &format!(
+                    "| {} | {} | {}/{} ({:.1}%) |\n",
+                    set.seed,
+                    set.cases,
+                    set.successes,
+                    set.cases,
+                    100.0 * set.successes as f64 / set.cases as f64
+                );
+            }
+            md += "\n";
+        }
         md += &format!(
             "Pose alone (centre within 5% of the size, hole axis within 5 degrees, shape errors aside): full clouds {:.1}%, single views {:.1}%.\n\n",
             100.0 * self.full_pose_rate,
@@ -447,5 +524,34 @@ impl Report for SyntheticReport {
         }
         md += "\n![Cumulative distributions of the errors (log x): centre / size, axis degrees, sizes, a4, eps; blue full clouds, red partial; the vertical line is the success bound](synthetic-errors.png)\n";
         md
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::wilson_interval;
+
+    #[test]
+    fn wilson_interval_matches_its_closed_form_and_stays_in_the_unit_interval() {
+        // the fifteen seed sets of the twenty-sixth session: 2656 of 2700 (figures from
+        // the formula evaluated independently in Python)
+        let [lo, hi] = wilson_interval(2656, 2700);
+        assert!((lo - 0.978_194_8).abs() < 1e-6, "{lo}");
+        assert!((hi - 0.987_838_1).abs() < 1e-6, "{hi}");
+        // every case a success: the upper end is 1, the lower 1 / (1 + z²/n)
+        let [lo, hi] = wilson_interval(180, 180);
+        assert_eq!(hi, 1.0);
+        assert!(
+            (lo - 1.0 / (1.0 + 1.959_964f64.powi(2) / 180.0)).abs() < 1e-6,
+            "{lo}"
+        );
+        // none a success mirrors it
+        let [lo, hi] = wilson_interval(0, 180);
+        assert_eq!(lo, 0.0);
+        assert!((hi - (1.0 - 1.0 / (1.0 + 1.959_964f64.powi(2) / 180.0))).abs() < 1e-6);
+        // 176 of 180 (97.8%) cannot tell 98% from 99%
+        let [lo, hi] = wilson_interval(176, 180);
+        assert!(lo < 0.95 && hi > 0.99, "{lo} {hi}");
+        assert_eq!(wilson_interval(0, 0), [0.0, 1.0]);
     }
 }
