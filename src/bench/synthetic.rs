@@ -150,7 +150,7 @@ pub fn wilson_interval(successes: usize, trials: usize) -> [f64; 2] {
 }
 
 fn interval<'a>(cases: impl Iterator<Item = &'a Case>) -> [f64; 2] {
-    let (n, ok) = cases.fold((0, 0), |(n, ok), c| (n + 1, ok + c.success as usize));
+    let (n, ok) = tally(cases);
     wilson_interval(ok, n)
 }
 
@@ -166,8 +166,13 @@ fn error_stats(cases: &[&Case]) -> ErrorStats {
     }
 }
 
+/// The cases and how many of them succeeded.
+fn tally<'a>(cases: impl Iterator<Item = &'a Case>) -> (usize, usize) {
+    cases.fold((0, 0), |(n, ok), c| (n + 1, ok + c.success as usize))
+}
+
 fn rate<'a>(cases: impl Iterator<Item = &'a Case>) -> f64 {
-    let (n, ok) = cases.fold((0, 0), |(n, ok), c| (n + 1, ok + c.success as usize));
+    let (n, ok) = tally(cases);
     if n == 0 { 0.0 } else { ok as f64 / n as f64 }
 }
 
@@ -286,10 +291,7 @@ pub fn run(
         .map(|(k, &seed)| SeedSet {
             seed,
             cases,
-            successes: out[k * cases..(k + 1) * cases]
-                .iter()
-                .filter(|c| c.success)
-                .count(),
+            successes: tally(out[k * cases..(k + 1) * cases].iter()).1,
         })
         .collect();
     Ok(SyntheticReport {
