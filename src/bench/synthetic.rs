@@ -284,6 +284,11 @@ pub fn run(
     }
     let full: Vec<&Case> = out.iter().filter(|c| !c.partial).collect();
     let partial: Vec<&Case> = out.iter().filter(|c| c.partial).collect();
+    let partial_with_outliers: Vec<&Case> = partial
+        .iter()
+        .copied()
+        .filter(|c| c.outliers > 0.0)
+        .collect();
     let (by_noise_ratio, by_warning) = bands(&out);
     let sets = seeds
         .iter()
@@ -303,13 +308,11 @@ pub fn run(
         overall_interval: interval(out.iter()),
         full_rate: rate(full.iter().copied()),
         partial_rate: rate(partial.iter().copied()),
-        partial_with_outliers_rate: rate(partial.iter().copied().filter(|c| c.outliers > 0.0)),
-        partial_with_outliers_interval: interval(
-            partial.iter().copied().filter(|c| c.outliers > 0.0),
-        ),
+        partial_with_outliers_rate: rate(partial_with_outliers.iter().copied()),
+        partial_with_outliers_interval: interval(partial_with_outliers.iter().copied()),
         attainable_overall_rate: mean_attainable(out.iter()),
         attainable_partial_with_outliers_rate: mean_attainable(
-            partial.iter().copied().filter(|c| c.outliers > 0.0),
+            partial_with_outliers.iter().copied(),
         ),
         full_pose_rate: pose_rate(&full),
         partial_pose_rate: pose_rate(&partial),
