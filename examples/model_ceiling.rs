@@ -5,72 +5,71 @@
 //! A case that fails here fails because the model's optimum near the truth is out of
 //! tolerance, whatever the search.
 //!
-//! `cargo run --release --example model_ceiling -- [SEED] [all|sample]`
+//! With `fine` it refines on the grid the fit's last polish uses
+//! (`likelihood::refine_finely`, twice as fine along the section), so a case that fails
+//! there fails the pipeline's own estimator whatever the search. SEED may be a
+//! comma-separated list of first seeds (sets of 180 each).
+//!
+//! `cargo run --release --example model_ceiling -- [SEED[,SEED...]] [all|sample] [coarse|fine]`
 
 use supertoroid::bench::synthetic::{DEFAULT_SEED, category};
-use supertoroid::eval::Normalization;
 use supertoroid::fit::FitOptions;
-use supertoroid::fit::ground_truth::{compare, make_case};
-use supertoroid::fit::{LIKELIHOOD_OUTLIER_WEIGHT, likelihood};
-use supertoroid::synth;
+use supertoroid::fit::ground_truth::{TruthPoints, make_case, model_from_truth};
 
 fn main() {
-    let seed: u64 = std::env::args()
+    let seeds: Vec<u64> = std::env::args()
         .nth(1)
-        .map(|s| s.parse().expect("SEED is a number"))
-        .unwrap_or(DEFAULT_SEED);
+        .map(|s| {
+            s.split(',')
+                .map(|x| x.parse().expect("SEED is a number"))
+                .collect()
+        })
+        .unwrap_or(vec![DEFAULT_SEED]);
     let on_sample = std::env::args().nth(2).is_some_and(|s| s == "sample");
+    let finely = std::env::args().nth(3).is_some_and(|s| s == "fine");
+    let (mut all_recovered, mut all_cases) = (0, 0);
+    for &seed in &seeds {
+        let recovered = set_ceiling(seed, on_sample, finely);
+        all_recovered += recovered;
+        all_cases += 180;
+    }
+    if seeds.len() > 1 {
+        println!("all sets: {all_recovered} of {all_cases}");
+    }
+}
+
+/// The model's ceiling on one set of 180 cases from `seed`: prints and returns how many
+/// it recovers.
+fn set_ceiling(seed: u64, on_sample: bool, finely: bool) -> usize {
     let options = FitOptions::default();
-    let limits = likelihood::Limits {
-        bounds: options.bounds(),
-        fixed_shape: [false; 6],
-        fixed_axis: false,
-    };
     let (mut recovered, mut failed) = (0, Vec::new());
     for i in 0..180 {
         let case_seed = seed + i as u64;
         let (partial, noise, outliers) = category(i);
-        if noise == 0.0 {
-            recovered += 1;
-            continue;
-        }
         let case = make_case(case_seed, partial, noise, outliers);
-        let norm = Normalization::of(&case.points);
-        let mut points = norm.points(&case.points);
-        if on_sample {
-            // the fit's stage-2 sample, drawn as `fit::prepare` draws it (after the 150
-            // of stage 1, from the case's seed); a change there must be made here too
-            let mut rng = synth::rng(case_seed);
-            let _stage1 = synth::subsample(&points, options.stage1_points, &mut rng);
-            points = synth::subsample(&points, options.stage2_points, &mut rng);
-        }
-        let truth = norm.candidate(&case.shape, &case.pose);
-        let sigma = noise * case.shape.size() / norm.scale;
-        let viewpoint = case.viewpoint.map(|v| norm.point(v));
-        let refined = likelihood::refine(
-            &points,
-            &truth,
-            sigma,
-            LIKELIHOOD_OUTLIER_WEIGHT,
-            viewpoint,
-            &limits,
-            2 * likelihood::MAX_ITERATIONS,
-        )
-        .expect("the suite's shapes have a hole");
-        let (shape, pose) = norm.to_world(&refined.candidate);
-        if compare((&case.shape, &case.pose), (&shape, &pose)).success() {
+        let points = if on_sample {
+            TruthPoints::Stage2Sample(case_seed)
+        } else {
+            TruthPoints::All
+        };
+        // noise-free cases count as recovered: the model never runs on them
+        let success =
+            model_from_truth(&case, points, finely, &options).is_none_or(|errors| errors.success());
+        if success {
             recovered += 1;
         } else {
             failed.push(case_seed);
         }
     }
     println!(
-        "seeds {seed}..{}: the model from the truth on {} recovers {recovered} of 180; fails {failed:?}",
+        "seeds {seed}..{}: the model from the truth on {} ({} grid) recovers {recovered} of 180; fails {failed:?}",
         seed + 179,
         if on_sample {
             "the stage-2 sample"
         } else {
             "all points"
         },
+        if finely { "fine" } else { "coarse" },
     );
+    recovered
 }

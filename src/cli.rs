@@ -126,6 +126,11 @@ pub enum BenchCommand {
         /// gets the camera's position, as a depth frame gives it)
         #[arg(long)]
         no_viewpoint: bool,
+        /// also refine each case from its true parameters with the fit's own estimator
+        /// and report how many land within the tolerances: the ceiling of any search
+        /// (about 0.1 s more per noisy case)
+        #[arg(long)]
+        from_truth: bool,
     },
     /// Time per solver iteration against points and candidates, per backend.
     Scaling {
@@ -607,11 +612,13 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
             cases,
             seed,
             no_viewpoint,
+            from_truth,
         } => {
             let r = crate::bench::synthetic::run(
                 *cases,
                 seed,
                 !*no_viewpoint,
+                *from_truth,
                 backend,
                 &options,
                 render.as_ref(),

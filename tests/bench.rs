@@ -156,6 +156,48 @@ fn bench_synthetic_runs_several_seed_sets_as_one_report() {
     assert!(md.contains("95% interval"), "{md}");
 }
 
+/// `--from-truth`: every case is also refined from its true parameters by the fit's
+/// estimator, noise-free ones count as within, and the set's and overall figures count
+/// those outcomes; without the flag the fields are null.
+#[test]
+fn bench_synthetic_from_truth_reports_the_estimators_ceiling() {
+    let out = out_dir("synthetic-truth");
+    // cases 10000-10002: full clouds, noise 0, 1, 2% of the size
+    let args = [
+        "synthetic",
+        "--cases",
+        "3",
+        "--backend",
+        "cpu",
+        "--from-truth",
+    ];
+    let v = bench(&args, &out, "synthetic");
+    let cases = v["cases"].as_array().unwrap();
+    let outcomes: Vec<bool> = cases
+        .iter()
+        .map(|c| c["from_truth"].as_bool().expect("from_truth on every case"))
+        .collect();
+    assert!(outcomes[0], "a noise-free case counts as within");
+    let within = outcomes.iter().filter(|&&ok| ok).count();
+    assert_eq!(
+        v["sets"][0]["from_truth_successes"].as_u64(),
+        Some(within as u64)
+    );
+    let rate = v["from_truth_overall_rate"].as_f64().unwrap();
+    assert!((rate - within as f64 / 3.0).abs() < 1e-12);
+    let md = std::fs::read_to_string(out.join("synthetic.md")).unwrap();
+    assert!(md.contains("| from the truth |"), "{md}");
+    assert!(md.contains(&format!("| {within}/3 (")), "{md}");
+    let csv = std::fs::read_to_string(out.join("synthetic.csv")).unwrap();
+    assert!(csv.lines().next().unwrap().ends_with(",from_truth"));
+    assert!(csv.lines().nth(1).unwrap().ends_with(",true"));
+
+    let plain = bench(&args[..5], &out, "synthetic");
+    assert!(plain["cases"][0]["from_truth"].is_null());
+    assert!(plain["from_truth_overall_rate"].is_null());
+    assert!(plain["sets"][0]["from_truth_successes"].is_null());
+}
+
 #[test]
 fn bench_synthetic_and_scaling_write_every_field() {
     let out = out_dir("synthetic");

@@ -3,6 +3,8 @@
 //! of the size, hole axis within 5 degrees, each a_i within 10%, each eps within 0.15,
 //! up to the shape's symmetries: axis sign, and the a1/a2 swap with a quarter turn).
 
+use super::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, likelihood};
+use crate::eval::Normalization;
 use crate::model::{Pose, Shape};
 use crate::synth::{self, Camera, Intrinsics};
 use glam::{DQuat, DVec3};
@@ -132,4 +134,67 @@ pub fn compare(truth: (&Shape, &Pose), fitted: (&Shape, &Pose)) -> Errors {
         a4,
         eps,
     }
+}
+
+/// Which points [`model_from_truth`] refines on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TruthPoints {
+    /// every point of the cloud, as the fit's last polish sees a cloud of the suite
+    /// (`FitOptions::polish_points` is above its size)
+    All,
+    /// the stage-2 sample the fit draws with this seed (`fit::prepare`'s draw: the
+    /// stage-1 sample first, then stage 2's, from the case's seed)
+    Stage2Sample(u64),
+}
+
+/// The fit's own estimator started at the answer: the noise model (`fit::likelihood`)
+/// refined from the true parameters and the true noise sigma of a noisy case, judged by
+/// the success rule. A case that fails here fails because the estimator's optimum near
+/// the truth is out of tolerance, whatever the search: it is the ceiling of any search
+/// for that estimator. `finely` refines on the grid the fit's last polish uses
+/// ([`likelihood::refine_finely`]), otherwise on the coarser one of stage 2's model.
+///
+/// None for a noise-free case (the model never runs on one, and the truth is an exact
+/// optimum of the least-squares fit that does) and for a shape the model does not cover
+/// (a4 <= 1).
+pub fn model_from_truth(
+    case: &Case,
+    points: TruthPoints,
+    finely: bool,
+    options: &FitOptions,
+) -> Option<Errors> {
+    if case.noise == 0.0 {
+        return None;
+    }
+    let norm = Normalization::of(&case.points);
+    let mut normalised = norm.points(&case.points);
+    if let TruthPoints::Stage2Sample(seed) = points {
+        // a change to `fit::prepare`'s draw must be made here too
+        let mut rng = synth::rng(seed);
+        let _stage1 = synth::subsample(&normalised, options.stage1_points, &mut rng);
+        normalised = synth::subsample(&normalised, options.stage2_points, &mut rng);
+    }
+    let truth = norm.candidate(&case.shape, &case.pose);
+    let sigma = case.noise * case.shape.size() / norm.scale;
+    let limits = likelihood::Limits {
+        bounds: options.bounds(),
+        fixed_shape: [false; 6],
+        fixed_axis: false,
+    };
+    let refine: likelihood::Refine = if finely {
+        likelihood::refine_finely
+    } else {
+        likelihood::refine
+    };
+    let refined = refine(
+        &normalised,
+        &truth,
+        sigma,
+        LIKELIHOOD_OUTLIER_WEIGHT,
+        case.viewpoint.map(|v| norm.point(v)),
+        &limits,
+        2 * likelihood::MAX_ITERATIONS,
+    )?;
+    let (shape, pose) = norm.to_world(&refined.candidate);
+    Some(compare((&case.shape, &case.pose), (&shape, &pose)))
 }
