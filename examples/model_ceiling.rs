@@ -14,7 +14,7 @@
 
 use supertoroid::bench::synthetic::{DEFAULT_SEED, category};
 use supertoroid::fit::FitOptions;
-use supertoroid::fit::ground_truth::{TruthPoints, make_case, model_from_truth};
+use supertoroid::fit::ground_truth::{TruthPoints, make_case, recovered_from_truth};
 
 fn main() {
     let seeds: Vec<u64> = std::env::args()
@@ -52,10 +52,7 @@ fn set_ceiling(seed: u64, on_sample: bool, finely: bool) -> usize {
         } else {
             TruthPoints::All
         };
-        // noise-free cases count as recovered: the model never runs on them
-        let success =
-            model_from_truth(&case, points, finely, &options).is_none_or(|errors| errors.success());
-        if success {
+        if recovered_from_truth(&case, points, finely, &options) {
             recovered += 1;
         } else {
             failed.push(case_seed);

@@ -10,7 +10,7 @@
 use super::{Machine, Report, Stats};
 use crate::eval::{Backend, make_evaluator};
 use crate::fit::ground_truth::{
-    AXIS_BOUND_DEGREES, CENTRE_BOUND, TruthPoints, compare, make_case, model_from_truth,
+    AXIS_BOUND_DEGREES, CENTRE_BOUND, TruthPoints, compare, make_case, recovered_from_truth,
 };
 use crate::fit::{FitOptions, attainable, fit};
 use serde::Serialize;
@@ -288,10 +288,8 @@ pub fn run(
                 .any(|w| w.starts_with("off a precise")),
             attainable: attainable::suite_case(&case, case_seed).unwrap_or(f64::NAN),
             visible_coverage: report.quality.visible_coverage.unwrap_or(f64::NAN),
-            from_truth: from_truth.then(|| {
-                model_from_truth(&case, TruthPoints::All, true, base)
-                    .map_or(case.noise == 0.0, |errors| errors.success())
-            }),
+            from_truth: from_truth
+                .then(|| recovered_from_truth(&case, TruthPoints::All, true, base)),
         });
         bar.inc(1);
     }
@@ -325,14 +323,14 @@ pub fn run(
     let sets = seeds
         .iter()
         .enumerate()
-        .map(|(k, &seed)| SeedSet {
-            seed,
-            cases,
-            successes: tally(out[k * cases..(k + 1) * cases].iter()).1,
-            from_truth_successes: out[k * cases..(k + 1) * cases]
-                .iter()
-                .map(|c| c.from_truth.map(usize::from))
-                .sum(),
+        .map(|(k, &seed)| {
+            let set = &out[k * cases..(k + 1) * cases];
+            SeedSet {
+                seed,
+                cases,
+                successes: tally(set.iter()).1,
+                from_truth_successes: set.iter().map(|c| c.from_truth.map(usize::from)).sum(),
+            }
         })
         .collect();
     Ok(SyntheticReport {

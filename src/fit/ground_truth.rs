@@ -198,3 +198,17 @@ pub fn model_from_truth(
     let (shape, pose) = norm.to_world(&refined.candidate);
     Some(compare((&case.shape, &case.pose), (&shape, &pose)))
 }
+
+/// Whether the fit's estimator started at the answer lands within the tolerances
+/// ([`model_from_truth`] on all points or the sample): a noise-free case counts as within
+/// (its truth is an exact optimum of the least-squares fit that runs on it), a noisy one
+/// the model cannot refine as not.
+pub fn recovered_from_truth(
+    case: &Case,
+    points: TruthPoints,
+    finely: bool,
+    options: &FitOptions,
+) -> bool {
+    model_from_truth(case, points, finely, options)
+        .map_or(case.noise == 0.0, |errors| errors.success())
+}
