@@ -103,9 +103,9 @@ fn bench_single_view(c: &mut Criterion) {
     let mut group = timed_group(c, "single view", 3);
     // the suite's case 10: single view, noise 1% of the size, no outliers
     let case = supertoroid::fit::ground_truth::make_case(10_010, true, 0.01, 0.0);
-    let options = |viewpoint| FitOptions {
+    let options = |viewpoint: Option<_>| FitOptions {
         seed: 10_010,
-        viewpoint,
+        viewpoint: viewpoint.into(),
         ..Default::default()
     };
     bench_variants(
@@ -122,7 +122,7 @@ fn bench_single_view(c: &mut Criterion) {
     let uncovered = supertoroid::fit::ground_truth::make_case(10_063, true, 0.0, 0.0);
     let options = |unseen_surface_retries| FitOptions {
         seed: 10_063,
-        viewpoint: uncovered.viewpoint,
+        viewpoint: uncovered.viewpoint.into(),
         unseen_surface_retries,
         ..Default::default()
     };
@@ -165,7 +165,7 @@ fn bench_noise_model(c: &mut Criterion) {
     let grown = supertoroid::fit::ground_truth::make_case(20_010, true, 0.01, 0.0);
     let options = |noise_model| FitOptions {
         seed: 20_010,
-        viewpoint: grown.viewpoint,
+        viewpoint: grown.viewpoint.into(),
         noise_model,
         ..Default::default()
     };

@@ -112,6 +112,10 @@ pub enum BenchCommand {
         dir: PathBuf,
         #[arg(long, default_value_t = 10)]
         runs: usize,
+        /// the fits' viewpoint: `none` (the default) as the paper fitted its clouds, or
+        /// `auto` as `fit` does (these clouds are views from their frame's origin)
+        #[arg(long, default_value = "none")]
+        viewpoint: String,
     },
     /// The ground-truth suite: --cases seeded synthetic clouds over 18 categories (full /
     /// partial x noise x outliers); success rates and error distributions.
@@ -124,8 +128,12 @@ pub enum BenchCommand {
         seed: Vec<u64>,
         /// do not tell the fit where the camera of a single-view case was (by default it
         /// gets the camera's position, as a depth frame gives it)
-        #[arg(long)]
+        #[arg(long, conflicts_with = "camera_frame")]
         no_viewpoint: bool,
+        /// give the clouds as a user posts them, with no viewpoint option: a single view in
+        /// its camera's frame (the fit must find the view itself), a full cloud as drawn
+        #[arg(long)]
+        camera_frame: bool,
         /// also refine each case from its true parameters with the fit's own estimator
         /// and report how many land within the tolerances: the ceiling of any search
         /// (about 0.1 s more per noisy case)
@@ -163,6 +171,17 @@ impl InputArgs {
     fn read(&self) -> Result<Vec<glam::DVec3>, Failure> {
         read_cloud(&self.file, self.format)
             .map_err(|e| Failure::input(format!("{}: {e}", self.file.display())))
+    }
+
+    /// The cloud and the viewpoint its file states (a PCD header's `VIEWPOINT`), else
+    /// `Auto`.
+    fn read_with_viewpoint(&self) -> Result<(Vec<glam::DVec3>, crate::fit::Viewpoint), Failure> {
+        let failed =
+            |e: crate::io::CloudError| Failure::input(format!("{}: {e}", self.file.display()));
+        let bytes = crate::io::read_bytes(&self.file).map_err(failed)?;
+        let format = self.format.or_else(|| Format::from_extension(&self.file));
+        let points = crate::io::parse_cloud(&bytes, format, Default::default()).map_err(failed)?;
+        Ok((points, crate::io::pcd::header_viewpoint(&bytes, format)))
     }
 }
 
@@ -218,8 +237,11 @@ pub struct FitArgs {
     /// the cloud's units; a product's dimensions)
     #[arg(long)]
     pub known: Option<String>,
-    /// where the depth sensor was, x,y,z in the cloud's frame (0,0,0 for a cloud in the
-    /// camera's own frame): the fit keeps solid out of the space the sensor saw through
+    /// where the depth sensor was: x,y,z in the cloud's frame, `none` for a view from
+    /// nowhere (a merged all-round cloud), or `auto` (the default): a PCD header's
+    /// VIEWPOINT, else the frame's origin where the cloud is a view from it (as sensors
+    /// write clouds), else none. The fit keeps solid out of the space the sensor saw
+    /// through
     #[arg(long, allow_hyphen_values = true)]
     pub viewpoint: Option<String>,
     /// other downsampling seeds to try when, with --viewpoint, the fit leaves most of the
@@ -436,7 +458,7 @@ fn distance(args: DistanceArgs) -> Result<(), Failure> {
 }
 
 fn fit(args: FitArgs) -> Result<(), Failure> {
-    let points = args.input.read()?;
+    let (points, header_viewpoint) = args.input.read_with_viewpoint()?;
     let known_axis = match &args.axis {
         Some(a) => Some(glam::DVec3::from_array(
             crate::model::parse_floats::<3>(a, "axis x,y,z").map_err(Failure::input)?,
@@ -444,10 +466,8 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         None => None,
     };
     let viewpoint = match &args.viewpoint {
-        Some(v) => Some(glam::DVec3::from_array(
-            crate::model::parse_floats::<3>(v, "viewpoint x,y,z").map_err(Failure::input)?,
-        )),
-        None => None,
+        Some(v) => crate::fit::viewpoint::parse(v).map_err(Failure::input)?,
+        None => header_viewpoint,
     };
     let options = crate::fit::FitOptions {
         seed: args.seed,
@@ -603,7 +623,15 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         Ok(())
     };
     match &args.which {
-        BenchCommand::Paper { dir, runs } => {
+        BenchCommand::Paper {
+            dir,
+            runs,
+            viewpoint,
+        } => {
+            let options = crate::fit::FitOptions {
+                viewpoint: crate::fit::viewpoint::parse(viewpoint).map_err(Failure::input)?,
+                ..options
+            };
             let r = crate::bench::paper::run(dir, *runs, backend, &options, render.as_ref())
                 .map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
@@ -612,12 +640,19 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
             cases,
             seed,
             no_viewpoint,
+            camera_frame,
             from_truth,
         } => {
+            use crate::bench::synthetic::Presentation;
+            let presentation = match (*no_viewpoint, *camera_frame) {
+                (true, _) => Presentation::NoViewpoint,
+                (_, true) => Presentation::Camera,
+                _ => Presentation::Viewpoint,
+            };
             let r = crate::bench::synthetic::run(
                 *cases,
                 seed,
-                !*no_viewpoint,
+                presentation,
                 *from_truth,
                 backend,
                 &options,

@@ -300,6 +300,14 @@ fn a_rendered_depth_png_back_projects_onto_the_surface() {
         height: 480,
     });
     let left = depth::back_project(&image, &opts, None).unwrap();
+    // a detector's box reaching past the image is clipped to it: the same pixels
+    opts.roi = Some(Roi {
+        x: -50,
+        y: -10,
+        width: 370,
+        height: 600,
+    });
+    assert_eq!(depth::back_project(&image, &opts, None).unwrap(), left);
     assert!(left.len() < cloud.len() && left.iter().all(|p| p.x < 0.0 + 1e-9 || p.z > 0.0));
     let mask: Vec<bool> = (0..640 * 480).map(|i| i % 640 >= 320).collect();
     let right =
@@ -459,14 +467,17 @@ fn bad_depth_frames_and_intrinsics_are_errors() {
     }
     let mut opts = options_of(&camera, 0.001);
     opts.roi = Some(Roi {
-        x: 600,
+        x: 700,
         y: 0,
         width: 100,
         height: 10,
     });
-    assert_eq!(
-        depth::back_project(&image, &opts, None).unwrap_err().code(),
-        "invalid_depth_options"
+    let e = depth::back_project(&image, &opts, None).unwrap_err();
+    assert_eq!(e.code(), "invalid_depth_options");
+    // in words, not in the code's syntax
+    assert!(
+        e.to_string().contains("x 700 y 0 width 100 height 10") && !e.to_string().contains('{'),
+        "{e}"
     );
     // all-zero depth
     let zero = supertoroid::synth::DepthImage {
@@ -545,4 +556,118 @@ fn rendered_frame_small() -> ((), (), (), supertoroid::synth::DepthImage) {
             data,
         },
     )
+}
+
+/// Masks come as datasets ship them: 1-bit grayscale (GraspNet and others), 8- and
+/// 16-bit; each keeps the same pixels. A colour mask is refused in words.
+#[test]
+fn masks_of_one_eight_and_sixteen_bits_keep_the_same_pixels() {
+    let (w, h) = (13u32, 5u32);
+    let keep = |x: u32, y: u32| (x + 2 * y) % 3 == 0;
+    let encode = |depth: png::BitDepth, color: png::ColorType, row: &dyn Fn(u32) -> Vec<u8>| {
+        let mut out = Vec::new();
+        let mut encoder = png::Encoder::new(&mut out, w, h);
+        encoder.set_color(color);
+        encoder.set_depth(depth);
+        let mut writer = encoder.write_header().unwrap();
+        let data: Vec<u8> = (0..h).flat_map(|y| row(y)).collect();
+        writer.write_image_data(&data).unwrap();
+        drop(writer);
+        out
+    };
+    let one_bit = encode(png::BitDepth::One, png::ColorType::Grayscale, &|y| {
+        (0..w.div_ceil(8))
+            .map(|byte| {
+                (0..8).fold(0u8, |acc, bit| {
+                    let x = byte * 8 + bit;
+                    acc | (((x < w && keep(x, y)) as u8) << (7 - bit))
+                })
+            })
+            .collect()
+    });
+    let eight = encode(png::BitDepth::Eight, png::ColorType::Grayscale, &|y| {
+        (0..w).map(|x| if keep(x, y) { 255 } else { 0 }).collect()
+    });
+    let sixteen = encode(png::BitDepth::Sixteen, png::ColorType::Grayscale, &|y| {
+        (0..w)
+            .flat_map(|x| if keep(x, y) { [0, 1] } else { [0, 0] })
+            .collect()
+    });
+    let expected: Vec<bool> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| keep(x, y)))
+        .collect();
+    for (name, png) in [("1-bit", one_bit), ("8-bit", eight), ("16-bit", sixteen)] {
+        let mask = depth::decode_mask_png(&png, w, h, limits()).unwrap();
+        assert_eq!(mask, expected, "{name}");
+    }
+    let rgb = encode(png::BitDepth::Eight, png::ColorType::Rgb, &|_| {
+        vec![0; 3 * w as usize]
+    });
+    let e = depth::decode_mask_png(&rgb, w, h, limits()).unwrap_err();
+    assert_eq!(e.code(), "malformed_image");
+    assert!(e.to_string().contains("8-bit RGB"), "{e}");
+}
+
+/// A PCD header's `VIEWPOINT` off the origin says where the sensor was; at the origin
+/// (what PCL writes whether or not it knows) it says nothing, and neither does another
+/// format.
+#[test]
+fn a_pcd_header_viewpoint_off_the_origin_is_where_the_sensor_was() {
+    use supertoroid::fit::{Viewpoint, ViewpointSource};
+    use supertoroid::io::pcd::header_viewpoint;
+    let pcd = |viewpoint: &str| {
+        format!(
+            "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n\
+             VIEWPOINT {viewpoint}\nPOINTS 1\nDATA ascii\n1 2 3\n"
+        )
+        .into_bytes()
+    };
+    let stated = pcd("0.1 -0.2 0.3 1 0 0 0");
+    assert_eq!(parse_cloud(&stated, None, limits()).unwrap().len(), 1);
+    assert_eq!(
+        header_viewpoint(&stated, None),
+        Viewpoint::At(DVec3::new(0.1, -0.2, 0.3), ViewpointSource::PcdHeader)
+    );
+    assert_eq!(
+        header_viewpoint(&pcd("0 0 0 1 0 0 0"), None),
+        Viewpoint::Auto
+    );
+    assert_eq!(
+        header_viewpoint(&pcd("nan 0 0 1 0 0 0"), None),
+        Viewpoint::Auto
+    );
+    assert_eq!(header_viewpoint(b"1 2 3\n4 5 6\n", None), Viewpoint::Auto);
+}
+
+/// Intrinsics that do not fit the image: a principal point outside it is refused, focal
+/// lengths far from a depth camera's are noted.
+#[test]
+fn intrinsics_that_disagree_with_the_image_are_refused_or_noted() {
+    let k = PinholeIntrinsics {
+        fx: 615.0,
+        fy: 615.0,
+        cx: 320.0,
+        cy: 240.0,
+    };
+    assert_eq!(depth::intrinsics_note(&k, 640, 480), None);
+    // fx and cx swapped
+    let swapped = PinholeIntrinsics {
+        fx: 320.0,
+        cx: 615.0,
+        ..k
+    };
+    assert_eq!(depth::intrinsics_note(&swapped, 640, 480), None);
+    let tiny = PinholeIntrinsics { fx: 50.0, ..k };
+    assert!(depth::intrinsics_note(&tiny, 640, 480).is_some_and(|n| n.contains("fx 50")));
+    let options = |k: PinholeIntrinsics| DepthOptions {
+        intrinsics: k,
+        depth_scale: 0.001,
+        roi: None,
+        depth_range: None,
+    };
+    assert!(options(swapped).validate(640, 480).is_ok());
+    let outside = PinholeIntrinsics { cx: 700.0, ..k };
+    let e = options(outside).validate(640, 480).unwrap_err();
+    assert_eq!(e.code(), "invalid_depth_options");
+    assert!(e.to_string().contains("principal point"), "{e}");
 }

@@ -402,8 +402,46 @@ fn every_bad_input_class_gets_its_status_and_a_json_error() {
         base64::engine::general_purpose::STANDARD
             .encode(supertoroid::io::depth::encode_depth_png(&blank))
     );
+    let mut off_image = bad_fx.clone();
+    off_image["intrinsics"] = params["intrinsics"].clone();
+    off_image["intrinsics"]["cx"] = json!(900.0);
+    // a whole frame: depth on every pixel, no box or mask to pick the object
+    let mut whole = params.clone();
+    let wall = supertoroid::synth::DepthImage {
+        data: vec![6000; 640 * 480],
+        ..blank.clone()
+    };
+    whole["depth_png"] = json!(
+        base64::engine::general_purpose::STANDARD
+            .encode(supertoroid::io::depth::encode_depth_png(&wall))
+    );
+    // metres taken for tenths of a millimetre: an object 10,000 times too large
+    let mut wrong_units = bad_fx.clone();
+    wrong_units["intrinsics"] = params["intrinsics"].clone();
+    wrong_units["depth_scale"] = json!(1.0);
     let json_case = |v: Value| ("application/json", v.to_string().into_bytes());
     let cases: Vec<(&str, &str, (&str, Vec<u8>), u16, &str)> = vec![
+        (
+            "principal point outside the image",
+            "/v1/fit/depth",
+            json_case(off_image),
+            422,
+            "invalid_depth_options",
+        ),
+        (
+            "a whole frame",
+            "/v1/fit/depth",
+            json_case(whole),
+            422,
+            "whole_frame",
+        ),
+        (
+            "depth scale of another unit",
+            "/v1/fit/depth",
+            json_case(wrong_units),
+            422,
+            "implausible_size",
+        ),
         (
             "malformed JSON",
             "/v1/fit",
@@ -514,7 +552,7 @@ fn every_bad_input_class_gets_its_status_and_a_json_error() {
             "/v1/fit/depth",
             json_case(wrong_size),
             400,
-            "malformed_cloud",
+            "malformed_image",
         ),
         (
             "bad intrinsics",
@@ -742,6 +780,144 @@ fn a_full_queue_answers_503_with_retry_after_and_then_recovers() {
         .send()
         .unwrap();
     assert_eq!(after.status(), 200);
+}
+
+/// Every way out of a request gives its queue slot back: requests that time out while
+/// waiting for the worker (504) and clients that hang up leave `/readyz` `queued` and the
+/// `supertoroid_queue_depth` gauge at 0 once the service is idle, and the queue never
+/// holds more than its capacity.
+#[test]
+fn timeouts_and_disconnects_leave_no_queued_request_behind() {
+    let server = Server::start(ServiceConfig {
+        workers: Some(1),
+        queue_depth: 4,
+        request_timeout: 0.3,
+        ..cpu_config()
+    });
+    let c = client();
+    let impatient = Client::builder()
+        .timeout(std::time::Duration::from_millis(150))
+        .build()
+        .unwrap();
+    let points: Vec<[f64; 3]> = case_points(5, false, 0.01, 0.05);
+    let body = json!({"points": points, "options": {"stage1_points": 2000, "stage2_points": 2000}});
+    let queued = |c: &Client| -> u64 {
+        c.get(server.url("/readyz"))
+            .send()
+            .unwrap()
+            .json::<Value>()
+            .unwrap()["queued"]
+            .as_u64()
+            .unwrap()
+    };
+    let statuses: Vec<Option<u16>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..12)
+            .map(|k| {
+                let (c, impatient, server, body) = (&c, &impatient, &server, &body);
+                scope.spawn(move || {
+                    // the first four clients are let in and hang up before their answer
+                    let client = if k < 4 {
+                        impatient
+                    } else {
+                        std::thread::sleep(std::time::Duration::from_millis(20));
+                        c
+                    };
+                    client
+                        .post(server.url("/v1/fit"))
+                        .json(body)
+                        .send()
+                        .ok()
+                        .map(|r| r.status().as_u16())
+                })
+            })
+            .collect();
+        let mut most = 0;
+        for _ in 0..10 {
+            most = most.max(queued(&c));
+            std::thread::sleep(std::time::Duration::from_millis(30));
+        }
+        assert!(most <= 4, "{most} queued, capacity 4");
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    assert!(statuses.contains(&Some(504)), "{statuses:?}");
+    assert!(statuses.contains(&None), "{statuses:?}");
+    assert!(
+        statuses
+            .iter()
+            .flatten()
+            .all(|s| [200, 503, 504].contains(s)),
+        "{statuses:?}"
+    );
+    // fits already running finish on their own; then nothing is left queued
+    let started = std::time::Instant::now();
+    while queued(&c) != 0 {
+        assert!(
+            started.elapsed().as_secs() < 30,
+            "still {} queued",
+            queued(&c)
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let metrics = metrics_text(&c, &server);
+    let gauge = metrics
+        .lines()
+        .find(|l| l.starts_with("supertoroid_queue_depth "))
+        .unwrap_or_else(|| panic!("no queue gauge in {metrics}"));
+    assert_eq!(gauge.split_whitespace().nth(1), Some("0"), "{gauge}");
+}
+
+/// The viewpoint option takes a position, "none" or "auto", in JSON and in a query
+/// string, and the report says which viewpoint the fit used and where it came from.
+#[test]
+fn the_viewpoint_given_or_said_to_be_none_is_the_one_reported() {
+    let server = Server::start(cpu_config());
+    let c = client();
+    // a single view in its camera's frame
+    let (view, _) = supertoroid::fit::ground_truth::make_case(6, true, 0.0, 0.0)
+        .in_camera_frame()
+        .unwrap();
+    let points: Vec<[f64; 3]> = view.iter().map(|p| p.to_array()).collect();
+    for (viewpoint, source) in [(json!("none"), "none"), (json!([0.0, 0.0, 0.0]), "request")] {
+        let r = c
+            .post(server.url("/v1/fit"))
+            .json(&json!({"points": points, "options": {"viewpoint": viewpoint, "retries": 0}}))
+            .send()
+            .unwrap();
+        assert_eq!(r.status(), 200);
+        let v: Value = r.json().unwrap();
+        assert_eq!(v["viewpoint"]["source"], source, "{}", v["viewpoint"]);
+        assert!(
+            v["viewpoint"]["reason"]
+                .as_str()
+                .is_some_and(|s| !s.is_empty())
+        );
+    }
+    let text: String = points
+        .iter()
+        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
+        .collect();
+    let r = c
+        .post(server.url("/v1/fit?viewpoint=none"))
+        .header("content-type", "text/plain")
+        .body(text)
+        .send()
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.json::<Value>().unwrap()["viewpoint"]["source"], "none");
+    let r = c
+        .post(server.url("/v1/fit"))
+        .json(&json!({"points": points, "options": {"viewpoint": "sideways"}}))
+        .send()
+        .unwrap();
+    assert_eq!(r.status(), 422);
+    let v: Value = r.json().unwrap();
+    assert!(
+        v["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("viewpoint"),
+        "{v}"
+    );
 }
 
 #[test]

@@ -12,7 +12,8 @@ use crate::eval::{Backend, make_evaluator};
 use crate::fit::ground_truth::{
     AXIS_BOUND_DEGREES, CENTRE_BOUND, TruthPoints, compare, make_case, recovered_from_truth,
 };
-use crate::fit::{FitOptions, attainable, fit};
+use crate::fit::{FitOptions, Viewpoint, ViewpointSource, attainable, fit};
+use crate::model::Pose;
 use serde::Serialize;
 
 /// The suite's first case seed (`bench synthetic --seed`): case i uses seed + i.
@@ -55,11 +56,55 @@ pub struct Case {
     /// the share of the fit's visible surface that has points on it (`fit::coverage`,
     /// single views with the viewpoint); NaN without one
     pub visible_coverage: f64,
+    /// whether the fit took the cloud for a view from its frame's origin (the camera's
+    /// position with `Presentation::Camera`)
+    pub viewpoint_found: bool,
     /// with `from_truth`: whether the fit's estimator started at the true parameters
     /// lands within the tolerances (`ground_truth::model_from_truth` on all points, the
     /// last polish's grid; a noise-free case counts as within: its truth is an exact
     /// optimum); None without
     pub from_truth: Option<bool>,
+}
+
+/// How the suite's clouds reach the fit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum Presentation {
+    /// in the suite's frame, a single view's fit told where its camera was
+    Viewpoint,
+    /// in the suite's frame, with no viewpoint (`Viewpoint::None`)
+    NoViewpoint,
+    /// as a user posts them, with no options: a single view in its camera's optical
+    /// frame, a full cloud in the suite's frame; the fit finds the view itself
+    /// (`Viewpoint::Auto`), and its pose is mapped back to the suite's frame to be judged
+    Camera,
+}
+
+impl Presentation {
+    fn describe(self) -> &'static str {
+        match self {
+            Presentation::Viewpoint => "with the camera's position",
+            Presentation::NoViewpoint => "without the camera's position",
+            Presentation::Camera => "in the camera's frame, no options",
+        }
+    }
+}
+
+/// A case's cloud as `presentation` gives it to the fit, with its viewpoint option and
+/// the pose that maps the fit back to the suite's frame.
+fn presented(
+    case: &crate::fit::ground_truth::Case,
+    presentation: Presentation,
+) -> (Vec<glam::DVec3>, Viewpoint, Pose) {
+    let identity = Pose::new(glam::DQuat::IDENTITY, glam::DVec3::ZERO);
+    match (presentation, case.viewpoint) {
+        (Presentation::Viewpoint, v) => (case.points.clone(), v.into(), identity),
+        (Presentation::NoViewpoint, _) => (case.points.clone(), Viewpoint::None, identity),
+        (Presentation::Camera, _) => match case.in_camera_frame() {
+            Some((points, camera)) => (points, Viewpoint::Auto, camera),
+            None => (case.points.clone(), Viewpoint::Auto, identity),
+        },
+    }
 }
 
 /// Successes among the cases of one cloud kind in one band of a quantity.
@@ -100,8 +145,8 @@ pub struct ErrorStats {
 pub struct SyntheticReport {
     pub machine: Machine,
     pub backend: String,
-    /// whether single-view fits were told the camera's position
-    pub viewpoint_given: bool,
+    /// how the clouds reached the fit
+    pub presentation: Presentation,
     pub cases: Vec<Case>,
     pub categories: Vec<Category>,
     /// each seed set's successes, in the order given
@@ -226,7 +271,7 @@ fn pose_rate(cases: &[&Case]) -> f64 {
 pub fn run(
     cases: usize,
     seeds: &[u64],
-    use_viewpoint: bool,
+    presentation: Presentation,
     from_truth: bool,
     backend: Backend,
     base: &FitOptions,
@@ -246,13 +291,19 @@ pub fn run(
         let (partial, noise, outliers) = category(i);
         let case_seed = seed + i as u64;
         let case = make_case(case_seed, partial, noise, outliers);
+        let (points, viewpoint, back) = presented(&case, presentation);
         let options = FitOptions {
             seed: case_seed,
-            viewpoint: case.viewpoint.filter(|_| use_viewpoint),
+            viewpoint,
             ..base.clone()
         };
-        let report = fit(evaluator.as_mut(), &case.points, &options)
+        let mut report = fit(evaluator.as_mut(), &points, &options)
             .map_err(|e| format!("case {case_seed}: {e}"))?;
+        let fitted = &report.fitted.1;
+        report.fitted.1 = Pose::new(
+            back.rotation * fitted.rotation,
+            back.to_world(fitted.translation),
+        );
         let e = compare(
             (&case.shape, &case.pose),
             (&report.fitted.0, &report.fitted.1),
@@ -288,6 +339,7 @@ pub fn run(
                 .any(|w| w.starts_with("off a precise")),
             attainable: attainable::suite_case(&case, case_seed).unwrap_or(f64::NAN),
             visible_coverage: report.quality.visible_coverage.unwrap_or(f64::NAN),
+            viewpoint_found: report.viewpoint.source == ViewpointSource::FrameOrigin,
             from_truth: from_truth
                 .then(|| recovered_from_truth(&case, TruthPoints::All, true, base)),
         });
@@ -336,7 +388,7 @@ pub fn run(
     Ok(SyntheticReport {
         machine: Machine::probe(),
         backend: evaluator.device_name(),
-        viewpoint_given: use_viewpoint,
+        presentation,
         sets,
         overall_rate: rate(out.iter()),
         overall_interval: interval(out.iter()),
@@ -483,11 +535,7 @@ impl Report for SyntheticReport {
             "Evaluator: {}. {} cases (single views {}). Success: overall {:.1}% (95% interval {:.1}-{:.1}%), full clouds {:.1}%, single-view partial {:.1}%, partial with outliers {:.1}% ({:.1}-{:.1}%).\n\n",
             self.backend,
             self.cases.len(),
-            if self.viewpoint_given {
-                "with the camera's position"
-            } else {
-                "without the camera's position"
-            },
+            self.presentation.describe(),
             100.0 * self.overall_rate,
             100.0 * self.overall_interval[0],
             100.0 * self.overall_interval[1],
@@ -596,7 +644,7 @@ mod tests {
 
     #[test]
     fn wilson_interval_matches_its_closed_form_and_stays_in_the_unit_interval() {
-        // the fifteen seed sets of the twenty-sixth session: 2656 of 2700 (figures from
+        // the fifteen seed sets' 2656 of 2700 (figures from
         // the formula evaluated independently in Python)
         let [lo, hi] = wilson_interval(2656, 2700);
         assert!((lo - 0.978_194_8).abs() < 1e-6, "{lo}");

@@ -26,6 +26,26 @@ pub struct Case {
     pub viewpoint: Option<DVec3>,
 }
 
+impl Case {
+    /// A single view's cloud in its camera's optical frame (as a sensor writes it), with
+    /// the camera's pose (world from camera, the camera `make_case` rendered from); None
+    /// for a full cloud.
+    pub fn in_camera_frame(&self) -> Option<(Vec<DVec3>, Pose)> {
+        let camera = Camera::look_at(
+            Intrinsics::REALSENSE_640X480,
+            self.viewpoint?,
+            self.pose.translation,
+            DVec3::Z,
+        );
+        let points = self
+            .points
+            .iter()
+            .map(|&p| camera.pose.to_canonical(p))
+            .collect();
+        Some((points, camera.pose))
+    }
+}
+
 /// One seeded case of the given category.
 pub fn make_case(seed: u64, partial: bool, noise: f64, outlier_fraction: f64) -> Case {
     let mut rng = synth::rng(seed);

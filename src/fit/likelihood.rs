@@ -55,14 +55,14 @@ pub const CUTOFF: f64 = 4.0;
 /// The most surface cells; past this the cells grow wider than [`CELL_SIGMAS`] sigmas (the
 /// kernel sum then ripples along the surface by 2·exp(-2 pi² / k²) at k sigmas, 22% at 3).
 /// On the suite, 12,000 cells at 2 sigmas gave the successes of 20,000 at 1.5 sigmas (441
-/// of 540 either way, eighth session) at about 60% of the time. With today's model the cap
+/// of 540 either way) at about 60% of the time. With today's model the cap
 /// still binds on the finer grids of 1%-noise single views: 12,000 cells 512 of 540,
 /// 24,000 515 (three such views gained, none lost; the single views' median fit time
-/// about 10% longer), 48,000 the same 515, slower (fourteenth session).
+/// about 10% longer), 48,000 the same 515, slower.
 pub const MAX_CELLS: usize = 24_000;
 /// Two steps in a row that raise the mean log-likelihood by less than this end the
 /// refinement (a thousand points: 0.02 in all, far below what tells two fits apart
-/// statistically). One such step ended it before the seventeenth session, and stopped
+/// statistically). One such step alone stopped
 /// 20175 in a flat valley 13% off in a3: two in a row gave 518 -> 519 of 540 (nothing
 /// lost), the fit times the same within the machine's noise.
 pub const STOP_DECREASE: f64 = 2e-5;

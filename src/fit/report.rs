@@ -73,6 +73,8 @@ pub struct FitReport {
     pub timing_ms: Timing,
     pub iterations: Iterations,
     pub backend: BackendOut,
+    /// the viewpoint the fit used, where it came from and why
+    pub viewpoint: super::ViewpointUsed,
     pub points: PointsOut,
     /// what the caller should know about this fit (e.g. a viewpoint that was ignored);
     /// absent when there is nothing

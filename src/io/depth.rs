@@ -24,13 +24,44 @@ pub struct PinholeIntrinsics {
     pub cy: f64,
 }
 
-/// A rectangle of pixels: columns x..x+width, rows y..y+height.
+/// A rectangle of pixels: columns x..x+width, rows y..y+height. A detector's box may
+/// reach past the image (x, y negative, or past its far edges): it is clipped to it.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct Roi {
-    pub x: u32,
-    pub y: u32,
+    pub x: i64,
+    pub y: i64,
     pub width: u32,
     pub height: u32,
+}
+
+impl std::fmt::Display for Roi {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "x {} y {} width {} height {}",
+            self.x, self.y, self.width, self.height
+        )
+    }
+}
+
+impl Roi {
+    /// The part of the rectangle inside a `width` x `height` image, None where nothing
+    /// of it is.
+    pub fn clipped(&self, width: u32, height: u32) -> Option<Roi> {
+        let span = |start: i64, len: u32, size: u32| {
+            let lo = start.clamp(0, size as i64);
+            let hi = (start + len as i64).clamp(0, size as i64);
+            (hi > lo).then_some((lo, (hi - lo) as u32))
+        };
+        let (x, w) = span(self.x, self.width, width)?;
+        let (y, h) = span(self.y, self.height, height)?;
+        Some(Roi {
+            x,
+            y,
+            width: w,
+            height: h,
+        })
+    }
 }
 
 /// How to turn a depth frame into a cloud.
@@ -66,22 +97,26 @@ impl DepthOptions {
                 "cx and cy must be finite".into(),
             ));
         }
+        let inside = |c: f64, size: u32| (0.0..=size as f64).contains(&c);
+        if !(inside(k.cx, width) && inside(k.cy, height)) {
+            return Err(CloudError::InvalidDepthOptions(format!(
+                "the principal point (cx {}, cy {}) lies outside the {width}x{height} image: \
+                 intrinsics of another resolution, or fields swapped",
+                k.cx, k.cy
+            )));
+        }
         if !(self.depth_scale.is_finite() && self.depth_scale > 0.0) {
             return Err(CloudError::InvalidDepthOptions(format!(
                 "depth_scale must be positive and finite, not {}",
                 self.depth_scale
             )));
         }
-        if let Some(r) = self.roi {
-            let fits = r.width > 0
-                && r.height > 0
-                && r.x.checked_add(r.width).is_some_and(|e| e <= width)
-                && r.y.checked_add(r.height).is_some_and(|e| e <= height);
-            if !fits {
-                return Err(CloudError::InvalidDepthOptions(format!(
-                    "roi {r:?} is empty or outside the {width}x{height} image"
-                )));
-            }
+        if let Some(r) = self.roi
+            && r.clipped(width, height).is_none()
+        {
+            return Err(CloudError::InvalidDepthOptions(format!(
+                "the roi ({r}) is empty or lies outside the {width}x{height} image"
+            )));
         }
         if let Some([lo, hi]) = self.depth_range
             && !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi)
@@ -92,6 +127,29 @@ impl DepthOptions {
         }
         Ok(())
     }
+}
+
+/// Focal lengths in this range of the image's larger side are a depth camera's (a
+/// D435's 640x480 stream: 0.6-1.0); outside it the intrinsics are likely another
+/// stream's or another unit's.
+pub const PLAUSIBLE_FOCAL: std::ops::RangeInclusive<f64> = 0.2..=5.0;
+
+/// A note for the report where the focal lengths are implausible for the image
+/// ([`PLAUSIBLE_FOCAL`]).
+pub fn intrinsics_note(k: &PinholeIntrinsics, width: u32, height: u32) -> Option<String> {
+    let side = width.max(height) as f64;
+    let plausible = |f: f64| PLAUSIBLE_FOCAL.contains(&(f / side));
+    (!(plausible(k.fx) && plausible(k.fy))).then(|| {
+        format!(
+            "intrinsics look wrong: fx {} and fy {} pixels for a {width}x{height} image \
+             (a depth camera's are {}-{} times its larger side); the pose and size \
+             scale with them",
+            k.fx,
+            k.fy,
+            PLAUSIBLE_FOCAL.start(),
+            PLAUSIBLE_FOCAL.end()
+        )
+    })
 }
 
 /// Decodes a 16-bit grayscale PNG depth image. `expected` (width, height), when given,
@@ -105,7 +163,9 @@ pub fn decode_depth_png(
     let (width, height, bit_depth, color, data) = decode_png(bytes, limits)?;
     if color != png::ColorType::Grayscale || bit_depth != png::BitDepth::Sixteen {
         return Err(bad(format!(
-            "a depth PNG must be 16-bit grayscale, this one is {bit_depth:?}-bit {color:?}"
+            "a depth PNG must be 16-bit grayscale, this one is {} {}",
+            bits(bit_depth),
+            colour(color)
         )));
     }
     check_size(width, height, expected)?;
@@ -152,14 +212,16 @@ pub fn decode_depth_raw(
     })
 }
 
-/// Decodes a mask PNG (8- or 16-bit grayscale; non-zero keeps the pixel).
+/// Decodes a mask PNG (1-, 2-, 4-, 8- or 16-bit grayscale; non-zero keeps the pixel).
 pub fn decode_mask_png(
     bytes: &[u8],
     width: u32,
     height: u32,
     limits: ReadLimits,
 ) -> Result<Vec<bool>, CloudError> {
-    let (w, h, bit_depth, color, data) = decode_png(bytes, limits)?;
+    // masks of fewer than 8 bits (what datasets ship) come out one byte a pixel
+    let (w, h, bit_depth, color, data) =
+        decode_png_with(bytes, limits, png::Transformations::EXPAND)?;
     check_size(w, h, Some((width, height))).map_err(|e| bad(format!("mask: {e}")))?;
     match (color, bit_depth) {
         (png::ColorType::Grayscale, png::BitDepth::Eight) => {
@@ -170,7 +232,9 @@ pub fn decode_mask_png(
             .map(|c| c[0] != 0 || c[1] != 0)
             .collect()),
         _ => Err(bad(format!(
-            "a mask PNG must be 8- or 16-bit grayscale, this one is {bit_depth:?}-bit {color:?}"
+            "a mask PNG must be grayscale (1 to 16 bits), this one is {} {}",
+            bits(bit_depth),
+            colour(color)
         ))),
     }
 }
@@ -186,17 +250,44 @@ fn check_size(width: u32, height: u32, expected: Option<(u32, u32)>) -> Result<(
 
 type Decoded = (u32, u32, png::BitDepth, png::ColorType, Vec<u8>);
 
+/// A PNG's bit depth in words.
+fn bits(depth: png::BitDepth) -> String {
+    format!("{}-bit", depth as u8)
+}
+
+/// A PNG's colour type in words.
+fn colour(color: png::ColorType) -> &'static str {
+    match color {
+        png::ColorType::Grayscale => "grayscale",
+        png::ColorType::GrayscaleAlpha => "grayscale with alpha",
+        png::ColorType::Rgb => "RGB",
+        png::ColorType::Rgba => "RGBA",
+        png::ColorType::Indexed => "palette",
+    }
+}
+
 fn decode_png(bytes: &[u8], limits: ReadLimits) -> Result<Decoded, CloudError> {
+    decode_png_with(bytes, limits, png::Transformations::IDENTITY)
+}
+
+/// Decodes a PNG under `transformations`; the bit depth and colour type returned are the
+/// output's.
+fn decode_png_with(
+    bytes: &[u8],
+    limits: ReadLimits,
+    transformations: png::Transformations,
+) -> Result<Decoded, CloudError> {
     let png_err = |e: png::DecodingError| bad(format!("PNG: {e}"));
     let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    decoder.set_transformations(transformations);
     // no more memory than the largest allowed frame takes
     decoder.set_limits(png::Limits {
         bytes: limits.max_points.saturating_mul(2).max(1 << 20),
     });
     let mut reader = decoder.read_info().map_err(png_err)?;
     let info = reader.info();
-    let (width, height, bit_depth, color) =
-        (info.width, info.height, info.bit_depth, info.color_type);
+    let (width, height) = (info.width, info.height);
+    let (color, bit_depth) = reader.output_color_type();
     super::check_count(width as u64 * height as u64, limits)?;
     let size = reader
         .output_buffer_size()
@@ -238,17 +329,22 @@ pub fn back_project(
     {
         return Err(bad("the mask does not match the image size"));
     }
-    let roi = options.roi.unwrap_or(Roi {
+    let whole = Roi {
         x: 0,
         y: 0,
         width: image.width,
         height: image.height,
-    });
+    };
+    let roi = options
+        .roi
+        .and_then(|r| r.clipped(image.width, image.height))
+        .unwrap_or(whole);
+    let (x0, y0) = (roi.x as u32, roi.y as u32);
     let [lo, hi] = options.depth_range.unwrap_or([0.0, f64::INFINITY]);
     let k = options.intrinsics;
     let mut points = Vec::new();
-    for v in roi.y..roi.y + roi.height {
-        for u in roi.x..roi.x + roi.width {
+    for v in y0..y0 + roi.height {
+        for u in x0..x0 + roi.width {
             let i = (v * image.width + u) as usize;
             let raw = image.data[i];
             if raw == 0 || mask.is_some_and(|m| !m[i]) {

@@ -136,6 +136,9 @@ impl CloudError {
     /// A short machine-readable name of the error class (used in HTTP error bodies).
     pub fn code(&self) -> &'static str {
         match self {
+            CloudError::Malformed {
+                format: "depth", ..
+            } => "malformed_image",
             CloudError::Parse { .. } | CloudError::Malformed { .. } => "malformed_cloud",
             CloudError::NonFinite { .. } => "non_finite",
             CloudError::Empty => "empty_cloud",

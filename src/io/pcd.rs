@@ -334,3 +334,35 @@ pub fn write_pcd_binary(out: &mut Vec<u8>, points: &[DVec3]) -> std::io::Result<
     out.extend_from_slice(&cursor.into_inner());
     Ok(())
 }
+
+/// The sensor's position a PCD header states (`VIEWPOINT tx ty tz qw qx qy qz`), for a
+/// cloud of that format: `Viewpoint::At` where it is off the origin, `Auto` otherwise
+/// (PCL writes the origin whether or not it knows, so an origin there says nothing).
+pub fn header_viewpoint(bytes: &[u8], format: Option<super::Format>) -> crate::fit::Viewpoint {
+    use crate::fit::{Viewpoint, ViewpointSource};
+    let is_pcd = format.or_else(|| super::Format::sniff(bytes)) == Some(super::Format::Pcd);
+    if !is_pcd {
+        return Viewpoint::Auto;
+    }
+    let head = &bytes[..bytes.len().min(64 * 1024)];
+    let stated = String::from_utf8_lossy(head)
+        .lines()
+        .take_while(|l| !l.trim_start().to_ascii_uppercase().starts_with("DATA"))
+        .find_map(|l| {
+            let mut tokens = l.split('#').next()?.split_ascii_whitespace();
+            if !tokens.next()?.eq_ignore_ascii_case("VIEWPOINT") {
+                return None;
+            }
+            let t: Vec<f64> = tokens
+                .take(3)
+                .map(|v| v.parse().ok())
+                .collect::<Option<_>>()?;
+            (t.len() == 3).then(|| DVec3::new(t[0], t[1], t[2]))
+        });
+    match stated {
+        Some(p) if p.is_finite() && p != DVec3::ZERO => {
+            Viewpoint::At(p, ViewpointSource::PcdHeader)
+        }
+        _ => Viewpoint::Auto,
+    }
+}

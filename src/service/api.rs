@@ -8,7 +8,7 @@ use super::error::{ApiError, ErrorBody, ErrorCode, ErrorDetail};
 use super::fitter::{FitJob, Readiness};
 use super::metrics::{CodeLabel, RouteLabel, RouteStatus};
 use crate::eval::Backend;
-use crate::fit::{FitOptions, FitReport};
+use crate::fit::{FitOptions, FitReport, Viewpoint, ViewpointSource};
 use crate::io::depth::{self, DepthOptions, PinholeIntrinsics, Roi};
 use crate::io::{Format, ReadLimits};
 use axum::body::{Body, Bytes};
@@ -50,15 +50,19 @@ pub struct FitRequestOptions {
     pub a3: Option<f64>,
     /// prior: known shape parameters, held fixed: `{"a1": 0.05, "a4": 2.1}` (sizes in the
     /// cloud's units; a product's dimensions), or in a query string `known=a1:0.05,a4:2.1`
-    #[param(value_type = Option<Object>)]
+    #[param(value_type = Option<String>)]
+    #[schema(value_type = Option<std::collections::BTreeMap<String, f64>>)]
     #[serde(default, deserialize_with = "known_from_object_or_text")]
     pub known: Option<[Option<f64>; 6]>,
-    /// where the depth sensor was, [x, y, z] in the cloud's frame ([0, 0, 0] for a cloud in
-    /// the camera's own frame; depth frames use the camera by default): the fit keeps
-    /// solid out of the space the sensor saw through (in a query string: `viewpoint=0,0,0`)
-    #[param(value_type = Option<Vec<f64>>)]
-    #[serde(default, deserialize_with = "viewpoint_from_array_or_text")]
-    pub viewpoint: Option<[f64; 3]>,
+    /// where the depth sensor was: [x, y, z] in the cloud's frame, "none" for a view from
+    /// nowhere (a merged all-round cloud), or "auto" (the default): a PCD header's
+    /// VIEWPOINT, else the frame's origin where the cloud is a view from it (as sensors
+    /// write clouds), else none; depth frames use their camera. The fit keeps solid out
+    /// of the space the sensor saw through (in a query string: `viewpoint=0,0,0`)
+    #[param(value_type = Option<String>)]
+    #[schema(schema_with = crate::fit::viewpoint::request_schema)]
+    #[serde(default)]
+    pub viewpoint: Option<Viewpoint>,
     /// other downsampling seeds to try when, with a viewpoint, the fit leaves most of the
     /// surface it shows the sensor without points, or the fit stays off a precise cloud
     /// or off its points' own scatter (then up to 16 in all) (default 3, 0 turns them off, at most 16); each retry costs
@@ -113,13 +117,6 @@ fn axis_from_array_or_text<'de, D: serde::Deserializer<'de>>(
     vector_from_array_or_text(d, "axis x,y,z")
 }
 
-/// The viewpoint as a JSON array `[x, y, z]` or as text `"x,y,z"` (query strings).
-fn viewpoint_from_array_or_text<'de, D: serde::Deserializer<'de>>(
-    d: D,
-) -> Result<Option<[f64; 3]>, D::Error> {
-    vector_from_array_or_text(d, "viewpoint x,y,z")
-}
-
 fn vector_from_array_or_text<'de, D: serde::Deserializer<'de>>(
     d: D,
     what: &str,
@@ -165,15 +162,6 @@ impl FitRequestOptions {
             }
             None => None,
         };
-        let viewpoint = match self.viewpoint {
-            Some(v) if !DVec3::from_array(v).is_finite() => {
-                return Err(ApiError::unprocessable(
-                    "invalid_option",
-                    "viewpoint must be finite",
-                ));
-            }
-            v => v.map(DVec3::from_array),
-        };
         let retries = self.retries.unwrap_or(defaults.unseen_surface_retries);
         if retries > crate::fit::MAX_UNSEEN_SURFACE_RETRIES {
             return Err(ApiError::unprocessable(
@@ -193,7 +181,7 @@ impl FitRequestOptions {
                 known_axis,
                 known_shape: crate::fit::known_with_a3(self.known.unwrap_or([None; 6]), self.a3)
                     .map_err(|m| ApiError::unprocessable("invalid_option", m))?,
-                viewpoint,
+                viewpoint: self.viewpoint.unwrap_or_default(),
                 method: self.method.unwrap_or_default(),
                 unseen_surface_retries: retries,
                 noise_model: self.noise_model.unwrap_or(defaults.noise_model),
@@ -263,11 +251,15 @@ pub struct DepthFitRequest {
     /// metres per depth unit (default 0.001, RealSense D400)
     pub depth_scale: Option<f64>,
     pub roi: Option<Roi>,
-    /// base64 of a mask PNG (8- or 16-bit grayscale, non-zero keeps the pixel)
+    /// base64 of a mask PNG (1- to 16-bit grayscale, non-zero keeps the pixel)
     pub mask_png: Option<String>,
     /// keep depths in [min, max] (scaled units)
     #[schema(value_type = Option<Vec<f64>>)]
     pub depth_range: Option<[f64; 2]>,
+    /// the largest plausible object, its bounding-box half-diagonal in the scaled unit
+    /// (default 2: metres with a metres-per-unit `depth_scale`); a larger fit is refused
+    /// (422 `implausible_size`): a wrong `depth_scale`, or no object in the pixels
+    pub max_size: Option<f64>,
     #[serde(default)]
     pub options: FitRequestOptions,
 }
@@ -522,7 +514,11 @@ async fn fit_cloud(
             | "application/x-ply"
     ) {
         let points = crate::io::parse_cloud(&bytes, query.format, limits(&state))?;
-        query.job(points, state.config.max_points)?
+        let mut job = query.job(points, state.config.max_points)?;
+        if job.options.viewpoint == Viewpoint::Auto {
+            job.options.viewpoint = crate::io::pcd::header_viewpoint(&bytes, query.format);
+        }
+        job
     } else {
         return Err(ApiError::new(
             StatusCode::UNSUPPORTED_MEDIA_TYPE,
@@ -639,12 +635,36 @@ async fn fit_depth(
             format!("content type {kind:?}: send application/json or multipart/form-data"),
         ));
     };
-    let points = depth_points(&state, &params, depth_bytes, mask_bytes)?;
+    let (points, notes) = depth_points(&state, &params, depth_bytes, mask_bytes)?;
     let mut job = params.options.job(points, state.config.max_points)?;
     // a depth frame's points are in the camera's optical frame: the sensor is the origin
-    job.options.viewpoint.get_or_insert(DVec3::ZERO);
-    Ok(respond(id, fit_one(&state, job).await?))
+    if job.options.viewpoint == Viewpoint::Auto {
+        job.options.viewpoint = Viewpoint::At(DVec3::ZERO, ViewpointSource::Camera);
+    }
+    let mut fit = fit_one(&state, job).await?;
+    let max_size = params.max_size.unwrap_or(DEFAULT_MAX_SIZE);
+    if fit.shape.size() > max_size {
+        return Err(ApiError::unprocessable(
+            "implausible_size",
+            format!(
+                "the fitted object is {:.3} across (half-diagonal), more than max_size {max_size} \
+                 in the depth's scaled unit: check depth_scale (metres per unit, 0.001 for \
+                 RealSense) and that the pixels hold one object",
+                fit.shape.size()
+            ),
+        ));
+    }
+    fit.warnings.extend(notes);
+    Ok(respond(id, fit))
 }
+
+/// The default `max_size` of a depth frame's object (metres with a metres-per-unit
+/// depth scale): no table-top object is larger.
+pub const DEFAULT_MAX_SIZE: f64 = 2.0;
+
+/// A depth frame whose valid pixels, with no ROI or mask to pick the object, cover more
+/// than this share of the image holds a scene, not an object.
+pub const WHOLE_FRAME_SHARE: f64 = 0.6;
 
 fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
     let status = e.status();
@@ -660,12 +680,14 @@ enum DepthBytes {
     Raw(Vec<u8>),
 }
 
+/// The frame's selected pixels back-projected, and notes for the report (an ROI clipped
+/// to the image).
 fn depth_points(
     state: &AppState,
     params: &DepthFitRequest,
     depth: DepthBytes,
     mask: Option<Vec<u8>>,
-) -> Result<Vec<DVec3>, ApiError> {
+) -> Result<(Vec<DVec3>, Vec<String>), ApiError> {
     let intrinsics = params.intrinsics.ok_or_else(|| {
         ApiError::unprocessable(
             "invalid_depth_options",
@@ -694,7 +716,34 @@ fn depth_points(
         roi: params.roi,
         depth_range: params.depth_range,
     };
-    Ok(depth::back_project(&image, &options, mask.as_deref())?)
+    let points = depth::back_project(&image, &options, mask.as_deref())?;
+    let pixels = image.width as f64 * image.height as f64;
+    if params.roi.is_none() && mask.is_none() && points.len() as f64 > WHOLE_FRAME_SHARE * pixels {
+        return Err(ApiError::unprocessable(
+            "whole_frame",
+            format!(
+                "{:.0}% of the frame's pixels have depth and no roi or mask picks the object: \
+                 give the object's box (roi) or mask",
+                100.0 * points.len() as f64 / pixels
+            ),
+        ));
+    }
+    let mut notes: Vec<String> = depth::intrinsics_note(&intrinsics, image.width, image.height)
+        .into_iter()
+        .collect();
+    notes.extend(
+        params
+            .roi
+            .and_then(|r| Some((r, r.clipped(image.width, image.height)?)))
+            .filter(|(r, clipped)| r != clipped)
+            .map(|(r, clipped)| {
+                format!(
+                    "roi clipped to the {}x{} image: ({r}) -> ({clipped})",
+                    image.width, image.height
+                )
+            }),
+    );
+    Ok((points, notes))
 }
 
 /// Fit many clouds in one request; each gets its own result or error.
@@ -705,8 +754,10 @@ fn depth_points(
         (status = 200, body = BatchResponse),
         (status = 400, body = ErrorBody),
         (status = 413, body = ErrorBody),
+        (status = 415, body = ErrorBody),
         (status = 422, body = ErrorBody),
-        (status = 503, body = ErrorBody)
+        (status = 503, body = ErrorBody),
+        (status = 504, body = ErrorBody)
     )
 )]
 async fn fit_batch(
@@ -788,6 +839,8 @@ async fn readyz(State(state): Shared) -> Json<Readiness> {
 /// Prometheus metrics (text exposition format).
 #[utoipa::path(get, path = "/metrics", responses((status = 200, content_type = "text/plain")))]
 async fn metrics(State(state): Shared) -> impl IntoResponse {
+    // the queue as it is now, not as the last response left it
+    state.metrics.queue_depth.set(state.fitter.queued() as i64);
     (
         [(
             header::CONTENT_TYPE,

@@ -154,9 +154,11 @@ impl Fitter {
             }
         }
         let work = async {
-            self.waiting.fetch_add(1, Ordering::Relaxed);
+            // counted while waiting for a worker, however the wait ends (a worker, the
+            // timeout, the client gone: the future is then dropped here)
+            let waiting = Waiting::enter(&self.waiting);
             let worker = self.workers.clone().acquire_owned().await;
-            self.waiting.fetch_sub(1, Ordering::Relaxed);
+            drop(waiting);
             let worker = worker.map_err(|_| ApiError::overloaded())?;
             let degraded = self.degraded.clone();
             let serial = self.worker_count > 1;
@@ -181,6 +183,22 @@ impl Fitter {
                 format!("the fit did not finish within {:?}", self.timeout),
             )),
         }
+    }
+}
+
+/// One request counted in [`Fitter::queued`] for as long as it lives.
+struct Waiting<'a>(&'a AtomicUsize);
+
+impl<'a> Waiting<'a> {
+    fn enter(count: &'a AtomicUsize) -> Self {
+        count.fetch_add(1, Ordering::Relaxed);
+        Self(count)
+    }
+}
+
+impl Drop for Waiting<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::Relaxed);
     }
 }
 
