@@ -18,20 +18,8 @@ use supertoroid::synth::{self, Camera, Intrinsics};
 /// One view in its camera's frame, with the truth in that frame.
 fn view(seed: u64) -> (Vec<DVec3>, Shape, Pose) {
     let mut rng = synth::rng(seed);
-    let shape = Shape::new(
-        rng.random_range(0.03..0.12),
-        rng.random_range(0.03..0.12),
-        rng.random_range(0.01..0.06),
-        rng.random_range(1.2..3.0),
-        rng.random_range(0.3..1.8),
-        rng.random_range(0.3..1.8),
-    );
-    let axis = DVec3::new(
-        rng.random_range(-1.0..1.0),
-        rng.random_range(-1.0..1.0),
-        rng.random_range(-1.0..1.0),
-    )
-    .normalize_or(DVec3::Z);
+    // the suite's shapes, drawn otherwise
+    let (shape, axis) = supertoroid::fit::ground_truth::random_shape(&mut rng);
     let intrinsics = Intrinsics::REALSENSE_640X480;
     // far enough for the object to fill about half the image's height
     let distance = intrinsics.fy * 2.0 * shape.size() / (0.5 * intrinsics.height as f64);
@@ -75,7 +63,9 @@ fn view(seed: u64) -> (Vec<DVec3>, Shape, Pose) {
 fn main() {
     let mut args = std::env::args().skip(1);
     let cases: u64 = args.next().map_or(40, |a| a.parse().expect("CASES"));
-    let first: u64 = args.next().map_or(900_000, |a| a.parse().expect("FIRST_SEED"));
+    let first: u64 = args
+        .next()
+        .map_or(900_000, |a| a.parse().expect("FIRST_SEED"));
     let mut evaluator = CpuEvaluator::new();
     let variants = [
         ("no options", Viewpoint::Auto),
@@ -93,8 +83,8 @@ fn main() {
                 ..Default::default()
             };
             let report = fit(&mut evaluator, &points, &options).expect("a fit");
-            right[k] += compare((&shape, &pose), (&report.fitted.0, &report.fitted.1)).success()
-                as usize;
+            right[k] +=
+                compare((&shape, &pose), (&report.fitted.0, &report.fitted.1)).success() as usize;
             times[k].push(report.timing_ms.total);
         }
     }

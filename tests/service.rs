@@ -810,27 +810,23 @@ fn timeouts_and_disconnects_leave_no_queued_request_behind() {
             .as_u64()
             .unwrap()
     };
+    let post = |client: &Client| {
+        client
+            .post(server.url("/v1/fit"))
+            .json(&body)
+            .send()
+            .ok()
+            .map(|r| r.status().as_u16())
+    };
+    // clients that hang up while their fit waits or runs
+    let gone: Vec<Option<u16>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..4).map(|_| scope.spawn(|| post(&impatient))).collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    assert!(gone.contains(&None), "{gone:?}");
+    // then more requests than one worker serves within the timeout
     let statuses: Vec<Option<u16>> = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..12)
-            .map(|k| {
-                let (c, impatient, server, body) = (&c, &impatient, &server, &body);
-                scope.spawn(move || {
-                    // the first four clients are let in and hang up before their answer
-                    let client = if k < 4 {
-                        impatient
-                    } else {
-                        std::thread::sleep(std::time::Duration::from_millis(20));
-                        c
-                    };
-                    client
-                        .post(server.url("/v1/fit"))
-                        .json(body)
-                        .send()
-                        .ok()
-                        .map(|r| r.status().as_u16())
-                })
-            })
-            .collect();
+        let handles: Vec<_> = (0..8).map(|_| scope.spawn(|| post(&c))).collect();
         let mut most = 0;
         for _ in 0..10 {
             most = most.max(queued(&c));
@@ -840,12 +836,10 @@ fn timeouts_and_disconnects_leave_no_queued_request_behind() {
         handles.into_iter().map(|h| h.join().unwrap()).collect()
     });
     assert!(statuses.contains(&Some(504)), "{statuses:?}");
-    assert!(statuses.contains(&None), "{statuses:?}");
     assert!(
         statuses
             .iter()
-            .flatten()
-            .all(|s| [200, 503, 504].contains(s)),
+            .all(|s| s.is_some_and(|s| [200, 503, 504].contains(&s))),
         "{statuses:?}"
     );
     // fits already running finish on their own; then nothing is left queued

@@ -46,9 +46,8 @@ impl Case {
     }
 }
 
-/// One seeded case of the given category.
-pub fn make_case(seed: u64, partial: bool, noise: f64, outlier_fraction: f64) -> Case {
-    let mut rng = synth::rng(seed);
+/// A shape in the suite's ranges and a random rotation axis for it.
+pub fn random_shape(rng: &mut synth::SeededRng) -> (Shape, DVec3) {
     let shape = Shape::new(
         rng.random_range(0.03..0.12),
         rng.random_range(0.03..0.12),
@@ -63,6 +62,13 @@ pub fn make_case(seed: u64, partial: bool, noise: f64, outlier_fraction: f64) ->
         rng.random_range(-1.0..1.0),
     )
     .normalize_or(DVec3::Z);
+    (shape, axis)
+}
+
+/// One seeded case of the given category.
+pub fn make_case(seed: u64, partial: bool, noise: f64, outlier_fraction: f64) -> Case {
+    let mut rng = synth::rng(seed);
+    let (shape, axis) = random_shape(&mut rng);
     let pose = Pose::new(
         DQuat::from_axis_angle(axis, rng.random_range(-3.1..3.1)),
         DVec3::new(

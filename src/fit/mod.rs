@@ -33,12 +33,14 @@ pub mod attainable;
 pub mod coverage;
 pub mod free_space;
 pub mod ground_truth;
+mod inferred_view;
 pub mod likelihood;
 mod report;
 pub mod scatter;
 pub mod starts;
 pub mod viewpoint;
 
+use inferred_view::{inferred, report_viewpoint, with_resolved};
 pub use report::{
     BackendOut, FitReport, Iterations, NOISE_MODEL_WARNING_RATIO, NOISE_WARNING_RATIO,
     PRECISE_MISFIT_WARNING, PointsOut, PoseOut, Quality, Timing, parse_report_json, quality,
@@ -448,8 +450,11 @@ pub fn fit_batch(
         .collect();
     let mut results = fit_batch_once(evaluator, &with_resolved(clouds, &resolved))?;
     // a cloud all round its object is no view: the checks after see it as none
-    for i in settle_inferred_viewpoints(evaluator, &with_resolved(clouds, &resolved), &mut results)?
-    {
+    for i in inferred_view::settle_inferred_viewpoints(
+        evaluator,
+        &with_resolved(clouds, &resolved),
+        &mut results,
+    )? {
         let (options, used) = &mut resolved[i];
         options.viewpoint = Viewpoint::None;
         *used = ViewpointUsed {
@@ -482,44 +487,6 @@ pub fn fit_batch(
         }
     }
     Ok(results)
-}
-
-/// The clouds with their resolved options.
-fn with_resolved<'a>(
-    clouds: &[(&'a [DVec3], &FitOptions)],
-    resolved: &'a [(FitOptions, ViewpointUsed)],
-) -> Vec<(&'a [DVec3], &'a FitOptions)> {
-    clouds
-        .iter()
-        .zip(resolved)
-        .map(|((points, _), (o, _))| (*points, o))
-        .collect()
-}
-
-/// What the report says of the viewpoint: as resolved, unless the fit found it
-/// contradicted by the points and fitted without it
-/// (`refit_without_inconsistent_viewpoints`). A viewpoint only inferred is then no
-/// warning, only a reason: nobody told the fit it was there.
-fn report_viewpoint(used: ViewpointUsed, r: &mut FitReport) {
-    let ignored = r
-        .warnings
-        .iter()
-        .position(|w| w.starts_with(VIEWPOINT_IGNORED));
-    r.viewpoint = match ignored {
-        Some(k) if used.position.is_some() => {
-            let warning = if used.source == ViewpointSource::FrameOrigin {
-                r.warnings.remove(k)
-            } else {
-                r.warnings[k].clone()
-            };
-            ViewpointUsed {
-                position: None,
-                source: ViewpointSource::None,
-                reason: format!("{}, but {warning}", used.reason),
-            }
-        }
-        _ => used,
-    };
 }
 
 /// The start of the warning of a viewpoint the fit found contradicted by its points.
@@ -1608,19 +1575,12 @@ fn refit_without_inconsistent_viewpoints(
             best_retry(&retries, i, first, clouds[i])
         })
         .collect();
-    let options: Vec<FitOptions> = contradicted
-        .iter()
-        .map(|&(i, _)| FitOptions {
-            viewpoint: Viewpoint::None,
-            ..clouds[i].1.clone()
-        })
-        .collect();
-    let batch: Vec<(&[DVec3], &FitOptions)> = contradicted
-        .iter()
-        .zip(&options)
-        .map(|(&(i, _), o)| (clouds[i].0, o))
-        .collect();
-    let refits = fit_batch(evaluator, &batch)?;
+    let indices: Vec<usize> = contradicted.iter().map(|&(i, _)| i).collect();
+    let options = inferred_view::options_without_viewpoint(clouds, &indices);
+    let refits = fit_batch(
+        evaluator,
+        &inferred_view::batch_of(clouds, &indices, &options),
+    )?;
     for (((i, violated), refit), kept) in contradicted.into_iter().zip(refits).zip(kept) {
         let first_ms = results[i].as_ref().map_or(0.0, |r| r.timing_ms.total);
         let spent = first_ms + retry_start.elapsed().as_secs_f64() * 1e3;
@@ -1648,97 +1608,6 @@ fn refit_without_inconsistent_viewpoints(
         });
     }
     Ok(())
-}
-
-/// Points of the cloud the test of [`more_likely_all_round`] scores (an even stride).
-const VIEW_TEST_POINTS: usize = 1000;
-/// The least sigma (normalised units) the test scores at: a noise-free cloud's fit
-/// leaves rounding, and the model's grid would grow without bound.
-const VIEW_TEST_MIN_SIGMA: f64 = 0.01;
-
-/// Whether the noise model finds the points more likely spread all round a fit made
-/// from an inferred viewpoint than seen from that viewpoint. A view's points lie on the
-/// side that faced the sensor, so spreading the density over the whole surface roughly
-/// halves it; an all-round cloud's far side is all but impossible as a view, unless its
-/// section is thinner than the noise. None where the model does not run (no hole).
-fn more_likely_all_round(points: &[DVec3], options: &FitOptions, r: &FitReport) -> bool {
-    let Some(viewpoint) = options.viewpoint.position() else {
-        return false;
-    };
-    let norm = Normalization::of(points);
-    let sample: Vec<DVec3> = points
-        .iter()
-        .step_by(points.len().div_ceil(VIEW_TEST_POINTS).max(1))
-        .map(|p| norm.point(*p))
-        .collect();
-    let candidate = norm.candidate(&r.fitted.0, &r.fitted.1);
-    let sigma = (r.quality.noise_sigma / norm.scale).max(VIEW_TEST_MIN_SIGMA);
-    let score = |v| likelihood::objective(&sample, &candidate, sigma, LIKELIHOOD_OUTLIER_WEIGHT, v);
-    match (score(None), score(Some(norm.point(viewpoint)))) {
-        (Some(all_round), Some(view)) => all_round < view,
-        _ => false,
-    }
-}
-
-/// A viewpoint only inferred stands unless the points are more likely all round the fit
-/// made from it ([`more_likely_all_round`]): such a cloud is fitted again as a view from
-/// nowhere (one more fit). Returns the clouds so refitted.
-fn settle_inferred_viewpoints(
-    evaluator: &mut dyn Evaluator,
-    clouds: &[(&[DVec3], &FitOptions)],
-    results: &mut [Result<FitReport, FitError>],
-) -> Result<Vec<usize>, FitError> {
-    let start = Instant::now();
-    let all_round: Vec<usize> = (0..clouds.len())
-        .filter(|&i| {
-            let (points, options) = clouds[i];
-            // a fit that leaves its visible surface bare is the retries' to mend first:
-            // its view is no fair test
-            inferred(options)
-                && results[i].as_ref().is_ok_and(|r| {
-                    r.quality
-                        .visible_coverage
-                        .is_some_and(|c| c >= coverage::MIN_VISIBLE_COVERAGE)
-                        && more_likely_all_round(points, options, r)
-                })
-        })
-        .collect();
-    let options: Vec<FitOptions> = all_round
-        .iter()
-        .map(|&i| FitOptions {
-            viewpoint: Viewpoint::None,
-            ..clouds[i].1.clone()
-        })
-        .collect();
-    let batch: Vec<(&[DVec3], &FitOptions)> = all_round
-        .iter()
-        .zip(&options)
-        .map(|(&i, o)| (clouds[i].0, o))
-        .collect();
-    let refits = fit_batch_once(evaluator, &batch)?;
-    let waited = start.elapsed().as_secs_f64() * 1e3;
-    for (i, r) in results.iter_mut().enumerate() {
-        if let (true, Ok(r)) = (inferred(clouds[i].1), r) {
-            r.timing_ms.total += waited;
-        }
-    }
-    for (&i, refit) in all_round.iter().zip(refits) {
-        let spent = results[i].as_ref().map_or(0.0, |r| r.timing_ms.total);
-        results[i] = refit.map(|mut r| {
-            r.timing_ms.total = spent;
-            r
-        });
-    }
-    Ok(all_round)
-}
-
-/// Whether `options` hold a viewpoint that was only inferred ([`Viewpoint::Auto`]
-/// resolved to the frame's origin).
-fn inferred(options: &FitOptions) -> bool {
-    matches!(
-        options.viewpoint,
-        Viewpoint::At(_, ViewpointSource::FrameOrigin)
-    )
 }
 
 /// A size reaching past the points by more than this is not supported by them (the
