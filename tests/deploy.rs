@@ -1,0 +1,82 @@
+//! The deployment files as a cluster and compose take them: the Kubernetes manifests
+//! (`deploy/kubernetes/`) validated against the Kubernetes schemas by
+//! `kubernetes-validate` (PyPI; `.ci/run` installs it), strictly, so an unknown field
+//! fails.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn manifests() -> Vec<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/kubernetes");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "yaml"))
+        .collect();
+    files.sort();
+    files
+}
+
+/// `kubernetes-validate --strict` on `files`: its exit status and output. A missing tool
+/// fails the test, saying how to install it.
+fn validate(files: &[PathBuf]) -> (bool, String) {
+    let out = Command::new("kubernetes-validate")
+        .arg("--strict")
+        .args(files)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("kubernetes-validate not found ({e}): pip install kubernetes-validate")
+        });
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr),
+    )
+}
+
+#[test]
+fn the_kubernetes_manifests_validate_against_the_schemas() {
+    let files = manifests();
+    let names: Vec<String> = files
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    for kind in [
+        "deployment.yaml",
+        "deployment-gpu.yaml",
+        "service.yaml",
+        "hpa.yaml",
+    ] {
+        assert!(names.iter().any(|n| n == kind), "no {kind} in {names:?}");
+    }
+    let (ok, output) = validate(&files);
+    assert!(ok, "{output}");
+    assert_eq!(output.matches("passed").count(), files.len(), "{output}");
+    // the probes are the service's own routes, the GPU variant asks for a GPU
+    let cpu =
+        std::fs::read_to_string(&files[names.iter().position(|n| n == "deployment.yaml").unwrap()])
+            .unwrap();
+    assert!(cpu.contains("path: /readyz") && cpu.contains("path: /healthz"));
+    let gpu = std::fs::read_to_string(
+        &files[names
+            .iter()
+            .position(|n| n == "deployment-gpu.yaml")
+            .unwrap()],
+    )
+    .unwrap();
+    assert!(gpu.contains("nvidia.com/gpu: 1"));
+}
+
+#[test]
+fn a_manifest_with_an_unknown_field_does_not_validate() {
+    let dir = std::env::temp_dir().join(format!("supertoroid-deploy-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("service.yaml");
+    let service = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/kubernetes/service.yaml"),
+    )
+    .unwrap();
+    std::fs::write(&bad, service.replace("targetPort:", "targetPortt:")).unwrap();
+    let (ok, output) = validate(&[bad]);
+    assert!(!ok, "{output}");
+    assert!(output.contains("targetPortt"), "{output}");
+}
