@@ -398,3 +398,30 @@ fn no_noise_model_gives_the_plain_fit() {
         "{modelled} vs {plain}"
     );
 }
+
+/// A fit on the GPU (lavapipe in CI) in an environment without `XDG_RUNTIME_DIR`, as in a
+/// container or a service, prints no error from the Vulkan loader's Wayland support.
+#[test]
+fn a_gpu_fit_without_a_runtime_dir_prints_no_loader_error() {
+    let cloud = tmp("quiet.xyz");
+    let sampled = bin()
+        .args(["sample", "--shape", SHAPE, "--points", "500", "-o"])
+        .arg(&cloud)
+        .output()
+        .unwrap();
+    assert!(sampled.status.success());
+    let out = bin()
+        .args(["fit", "--backend", "gpu"])
+        .arg(&cloud)
+        .env_remove("XDG_RUNTIME_DIR")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "no GPU adapter? install mesa-vulkan-drivers and set WGPU_BACKEND=vulkan: {stderr}"
+    );
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+    let fit: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(fit["backend"]["kind"], "gpu");
+}
