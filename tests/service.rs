@@ -419,8 +419,18 @@ fn every_bad_input_class_gets_its_status_and_a_json_error() {
     let mut wrong_units = bad_fx.clone();
     wrong_units["intrinsics"] = params["intrinsics"].clone();
     wrong_units["depth_scale"] = json!(1.0);
+    let mut no_size = wrong_units.clone();
+    no_size["depth_scale"] = params["depth_scale"].clone();
+    no_size["max_size"] = json!(-1.0);
     let json_case = |v: Value| ("application/json", v.to_string().into_bytes());
     let cases: Vec<(&str, &str, (&str, Vec<u8>), u16, &str)> = vec![
+        (
+            "max_size not positive",
+            "/v1/fit/depth",
+            json_case(no_size),
+            422,
+            "invalid_depth_options",
+        ),
         (
             "principal point outside the image",
             "/v1/fit/depth",

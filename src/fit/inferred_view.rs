@@ -20,7 +20,7 @@ const VIEW_TEST_MIN_SIGMA: f64 = 0.01;
 /// from an inferred viewpoint than seen from that viewpoint. A view's points lie on the
 /// side that faced the sensor, so spreading the density over the whole surface roughly
 /// halves it; an all-round cloud's far side is all but impossible as a view, unless its
-/// section is thinner than the noise. None where the model does not run (no hole).
+/// section is thinner than the noise. False where the model does not run (no hole).
 fn more_likely_all_round(points: &[DVec3], options: &FitOptions, r: &FitReport) -> bool {
     let Some(viewpoint) = options.viewpoint.position() else {
         return false;

@@ -635,6 +635,13 @@ async fn fit_depth(
             format!("content type {kind:?}: send application/json or multipart/form-data"),
         ));
     };
+    let max_size = params.max_size.unwrap_or(DEFAULT_MAX_SIZE);
+    if !(max_size.is_finite() && max_size > 0.0) {
+        return Err(ApiError::unprocessable(
+            "invalid_depth_options",
+            format!("max_size must be positive and finite, not {max_size}"),
+        ));
+    }
     let (points, notes) = depth_points(&state, &params, depth_bytes, mask_bytes)?;
     let mut job = params.options.job(points, state.config.max_points)?;
     // a depth frame's points are in the camera's optical frame: the sensor is the origin
@@ -642,7 +649,6 @@ async fn fit_depth(
         job.options.viewpoint = Viewpoint::At(DVec3::ZERO, ViewpointSource::Camera);
     }
     let mut fit = fit_one(&state, job).await?;
-    let max_size = params.max_size.unwrap_or(DEFAULT_MAX_SIZE);
     if fit.shape.size() > max_size {
         return Err(ApiError::unprocessable(
             "implausible_size",
