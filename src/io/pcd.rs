@@ -36,6 +36,8 @@ pub struct PcdHeader {
     pub data: String,
     /// byte offset of the data section
     pub data_offset: usize,
+    /// the sensor's position, `VIEWPOINT`'s tx ty tz, where the line has three numbers
+    pub viewpoint: Option<DVec3>,
 }
 
 impl PcdHeader {
@@ -161,6 +163,14 @@ impl PcdHeader {
             )));
         }
         check_count(points, limits)?;
+        let viewpoint = keys.get("VIEWPOINT").and_then(|v| {
+            let t: Vec<f64> = v
+                .iter()
+                .take(3)
+                .map(|x| x.parse().ok())
+                .collect::<Option<_>>()?;
+            (t.len() == 3).then(|| DVec3::new(t[0], t[1], t[2]))
+        });
         let header = PcdHeader {
             fields,
             sizes,
@@ -171,6 +181,7 @@ impl PcdHeader {
             points,
             data,
             data_offset: offset,
+            viewpoint,
         };
         for axis in ["x", "y", "z"] {
             let i = header
@@ -344,21 +355,9 @@ pub fn header_viewpoint(bytes: &[u8], format: Option<super::Format>) -> crate::f
     if !is_pcd {
         return Viewpoint::Auto;
     }
-    let head = &bytes[..bytes.len().min(64 * 1024)];
-    let stated = String::from_utf8_lossy(head)
-        .lines()
-        .take_while(|l| !l.trim_start().to_ascii_uppercase().starts_with("DATA"))
-        .find_map(|l| {
-            let mut tokens = l.split('#').next()?.split_ascii_whitespace();
-            if !tokens.next()?.eq_ignore_ascii_case("VIEWPOINT") {
-                return None;
-            }
-            let t: Vec<f64> = tokens
-                .take(3)
-                .map(|v| v.parse().ok())
-                .collect::<Option<_>>()?;
-            (t.len() == 3).then(|| DVec3::new(t[0], t[1], t[2]))
-        });
+    let stated = PcdHeader::scan(bytes, ReadLimits::default())
+        .ok()
+        .and_then(|h| h.viewpoint);
     match stated {
         Some(p) if p.is_finite() && p != DVec3::ZERO => {
             Viewpoint::At(p, ViewpointSource::PcdHeader)
