@@ -11,6 +11,7 @@
 //!   candidates): WGSL compute shaders through wgpu, and the f64 CPU reference.
 //! * [`io`]: cloud readers and writers.
 //! * [`fit`], [`solve`]: the two-stage fit and its interior-point solver.
+//! * [`grasp`]: surface queries and parallel-jaw grasps on a fitted object.
 //! * [`service`]: the HTTP service (axum).
 //! * [`bench`](mod@bench): the benchmark harness (paper clouds, ground-truth suite, scaling).
 //! * [`render`]: headless pictures of clouds and fits (wgpu render pipeline).
@@ -20,6 +21,7 @@ pub mod bench;
 pub mod cli;
 pub mod eval;
 pub mod fit;
+pub mod grasp;
 pub mod io;
 pub mod model;
 pub mod render;

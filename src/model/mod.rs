@@ -5,13 +5,18 @@
 
 mod differential;
 mod distance;
+mod plane;
 mod shape;
 
-pub use differential::{NormalCurvatures, normal_curvatures, tangents, unit_normal};
+pub use differential::{
+    NormalCurvatures, PrincipalFrame, SurfaceJet, normal_curvatures, principal_frame, surface_jet,
+    tangents, unit_normal,
+};
 pub use distance::{
     MeridianPoint, ResidualGradient, meridian_distance, meridian_distance_stepwise,
     meridian_residual_with_gradient,
 };
+pub use plane::Plane;
 pub use shape::{
     Pose, Shape, ShapeBounds, mean_superellipse_point, mean_superellipse_radius, parse_floats,
     signed_pow, superellipse_norm,

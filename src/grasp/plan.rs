@@ -1,0 +1,471 @@
+//! Parallel-jaw grasps for a fitted object, after the heuristics of paper §IV: contacts
+//! on the fitted surface where the normals oppose each other, ranked by the quantities
+//! the paper names (antipodality, curvature at the contacts, distance from the centre of
+//! mass).
+//!
+//! Candidates, in the object's canonical frame (z the hole axis):
+//! * with a through hole (a4 > 1), around the mean superellipse: a pinch across the
+//!   section's height (contacts at its top and bottom, the hand coming in from outside
+//!   the ring or along it), and a pinch across its width (one finger in the hole, the
+//!   hand along the axis); the section's thinner direction scores better by its flatter
+//!   contacts;
+//! * across the whole body through its centre, in every direction of the x-y plane (the
+//!   hand along the axis or across it);
+//! * without a hole, also across the axis (top and bottom, the hand from the side): the
+//!   three principal axes of a superellipsoid are among these.
+//!
+//! A candidate is dropped where it does not fit the opening, its normals leave the
+//! friction cone, a finger or the palm would meet the surface on the way in, the hand
+//! would go through the support plane, or it comes from behind the object as the camera
+//! sees it. Everything is deterministic: the same object gives the same list.
+
+use super::gripper::{FrameBox, GraspFrame, Gripper, POSTURES, hand_boxes};
+use super::surface::{SurfacePoint, at_parameters};
+use crate::model::{Plane, Pose, Shape, signed_pow};
+use glam::{DMat3, DQuat, DVec3};
+use serde::Serialize;
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
+
+/// Positions around the ring for the section pinches.
+pub const PINCHES_AROUND: usize = 16;
+/// Directions across the body (a half turn; the other half is the same grasps).
+pub const BODY_DIRECTIONS: usize = 8;
+/// Side approaches for the grasps across a superellipsoid's axis.
+pub const SIDE_APPROACHES: usize = 8;
+/// The collision check samples the surface on a grid about this fraction of the finger's
+/// width apart (at least 16 x 32 nodes, at most 64 x 128), and grows the hand's boxes by
+/// half the grid's longest cell diagonal, so that no part of the surface between the
+/// nodes can reach into a box unseen.
+pub const COLLISION_SPACING: f64 = 0.25;
+/// An approach pointing towards the camera by more than this cosine comes from behind.
+pub const BEHIND_COSINE: f64 = 0.25;
+/// Weights of the score's terms: antipodality, flatness at the contacts, centring.
+pub const SCORE_WEIGHTS: [f64; 3] = [0.5, 0.25, 0.25];
+
+/// What a grasp is planned for.
+#[derive(Clone, Copy, Debug)]
+pub struct GraspRequest {
+    pub shape: Shape,
+    pub pose: Pose,
+    pub gripper: Gripper,
+    /// Coulomb friction coefficient at the contacts (the cone's half-angle is atan(mu))
+    pub friction: f64,
+    /// the table, where known: no part of the hand may go below it
+    pub plane: Option<Plane>,
+    /// the camera's position: no approach from behind the object
+    pub viewpoint: Option<DVec3>,
+    pub max_grasps: usize,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum GraspKind {
+    /// across the ring's section, top to bottom
+    SectionHeight,
+    /// across the ring's section, one finger in the hole
+    SectionWidth,
+    /// across the whole body through its centre, perpendicular to the axis
+    AcrossBody,
+    /// across the axis of a shape without a hole, top to bottom
+    AlongAxis,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, utoipa::ToSchema)]
+pub struct ScoreTerms {
+    /// how far inside the friction cone the worse contact normal is: 0 on its edge,
+    /// 1 exactly antipodal
+    pub antipodal: f64,
+    /// 1/(1 + k·w/2) for the larger principal curvature k at the contacts and the pad
+    /// width w: the contact area's proxy (1 flat, small on sharp edges)
+    pub flatness: f64,
+    /// 1 - d/size for the distance d of the closing line from the centre of mass: the
+    /// moment gravity puts on the grasp
+    pub centred: f64,
+}
+
+/// One grasp, in the frame of the fit (the camera's for depth frames).
+#[derive(Clone, Debug, PartialEq, Serialize, utoipa::ToSchema)]
+pub struct Grasp {
+    pub kind: GraspKind,
+    /// in [0, 1], the weighted sum of `score_terms`
+    pub score: f64,
+    pub score_terms: ScoreTerms,
+    /// midway between the contacts
+    #[schema(value_type = Vec<f64>)]
+    pub position: [f64; 3],
+    /// unit direction the hand moves in to grasp
+    #[schema(value_type = Vec<f64>)]
+    pub approach: [f64; 3],
+    /// unit direction from the first contact to the second
+    #[schema(value_type = Vec<f64>)]
+    pub closing: [f64; 3],
+    /// approach × closing
+    #[schema(value_type = Vec<f64>)]
+    pub binormal: [f64; 3],
+    /// distance between the contacts
+    pub width: f64,
+    /// the jaws' opening before they close
+    pub pregrasp_opening: f64,
+    /// how far the fingertips reach past `position` along the approach
+    pub tip_reach: f64,
+    /// how far the object reaches back from the contact line towards the palm, within
+    /// the jaws (at most the finger depth less its tip)
+    pub depth: f64,
+    /// row-major R with columns (approach, closing, binormal): the hand's frame
+    #[schema(value_type = Vec<Vec<f64>>)]
+    pub rotation: [[f64; 3]; 3],
+    #[schema(value_type = Vec<f64>)]
+    pub quaternion_wxyz: [f64; 4],
+    #[schema(value_type = Vec<Vec<f64>>)]
+    pub contacts: [[f64; 3]; 2],
+    /// the fitted surface's outward normals at the contacts
+    #[schema(value_type = Vec<Vec<f64>>)]
+    pub normals: [[f64; 3]; 2],
+}
+
+/// Why candidates were dropped.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, utoipa::ToSchema)]
+pub struct Rejections {
+    pub opening: usize,
+    pub friction: usize,
+    pub collision: usize,
+    pub plane: usize,
+    pub behind: usize,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, utoipa::ToSchema)]
+pub struct GraspPlan {
+    /// best first, at most `max_grasps`
+    pub grasps: Vec<Grasp>,
+    pub candidates: usize,
+    pub rejected: Rejections,
+}
+
+/// A candidate before it is checked: contact parameters and the approach, canonical.
+struct Candidate {
+    kind: GraspKind,
+    contacts: [(f64, f64); 2],
+    approach: DVec3,
+}
+
+pub fn validate(request: &GraspRequest) -> Result<(), String> {
+    request.shape.validate()?;
+    request.gripper.validate()?;
+    if !(request.friction.is_finite() && request.friction > 0.0) {
+        return Err(format!(
+            "friction must be positive and finite, got {}",
+            request.friction
+        ));
+    }
+    if let Some(v) = request.viewpoint
+        && !v.is_finite()
+    {
+        return Err(format!("viewpoint must be finite, got {v:?}"));
+    }
+    Ok(())
+}
+
+fn candidates(shape: &Shape) -> Vec<Candidate> {
+    let mut out = Vec::new();
+    let horizontal = |omega: f64| DVec3::new(omega.cos(), omega.sin(), 0.0);
+    if shape.has_hole() {
+        for k in 0..PINCHES_AROUND {
+            let omega = TAU * k as f64 / PINCHES_AROUND as f64;
+            // the mean superellipse's outward direction and tangent at omega
+            let m = crate::model::mean_superellipse_point(shape, omega);
+            let outward = DVec3::new(m[0], m[1], 0.0).normalize();
+            let along = DVec3::Z.cross(outward);
+            for approach in [-outward, along, -along] {
+                out.push(Candidate {
+                    kind: GraspKind::SectionHeight,
+                    contacts: [(-FRAC_PI_2, omega), (FRAC_PI_2, omega)],
+                    approach,
+                });
+            }
+            for approach in [-DVec3::Z, DVec3::Z] {
+                out.push(Candidate {
+                    kind: GraspKind::SectionWidth,
+                    contacts: [(PI, omega), (0.0, omega)],
+                    approach,
+                });
+            }
+        }
+    }
+    for k in 0..BODY_DIRECTIONS {
+        let omega = PI * k as f64 / BODY_DIRECTIONS as f64;
+        let across = horizontal(omega);
+        let side = DVec3::Z.cross(across);
+        for approach in [-DVec3::Z, DVec3::Z, side, -side] {
+            out.push(Candidate {
+                kind: GraspKind::AcrossBody,
+                contacts: [(0.0, omega + PI), (0.0, omega)],
+                approach,
+            });
+        }
+    }
+    if !shape.has_hole() {
+        let top = shape.eta_range().min(FRAC_PI_2);
+        for k in 0..SIDE_APPROACHES {
+            let omega = TAU * k as f64 / SIDE_APPROACHES as f64;
+            out.push(Candidate {
+                kind: GraspKind::AlongAxis,
+                contacts: [(-top, 0.0), (top, 0.0)],
+                approach: horizontal(omega),
+            });
+        }
+    }
+    out
+}
+
+enum Verdict {
+    Keep(Grasp),
+    Drop(fn(&mut Rejections) -> &mut usize),
+}
+
+/// Plans, checks and ranks the grasps of one object.
+pub fn plan(request: &GraspRequest) -> Result<GraspPlan, String> {
+    validate(request)?;
+    let GraspRequest { shape, pose, .. } = *request;
+    let samples = collision_samples(&shape, &pose, &request.gripper);
+    let all = candidates(&shape);
+    let mut rejected = Rejections::default();
+    let mut kept = Vec::new();
+    for candidate in &all {
+        match check(request, candidate, &samples)? {
+            Verdict::Keep(g) => kept.push(g),
+            Verdict::Drop(field) => *field(&mut rejected) += 1,
+        }
+    }
+    // stable: equal scores keep the candidates' order
+    kept.sort_by(|a, b| b.score.total_cmp(&a.score));
+    kept.truncate(request.max_grasps);
+    Ok(GraspPlan {
+        grasps: kept,
+        candidates: all.len(),
+        rejected,
+    })
+}
+
+/// The angle of eq. (2)'s parameter whose point lies at polar angle `phi` of a
+/// superellipse of exponent `eps` (and back with 1/eps): nodes uniform in polar angle are
+/// spread evenly over flat faces and corners alike, where nodes uniform in the parameter
+/// crowd into the corners of small-eps shapes.
+fn polar_to_parameter(phi: f64, eps: f64) -> f64 {
+    let (s, c) = phi.sin_cos();
+    signed_pow(s, 1.0 / eps).atan2(signed_pow(c, 1.0 / eps))
+}
+
+/// A collision sample: a node of the surface and the radius within which every surface
+/// point of its adjacent cells lies (half the longest cell diagonal).
+#[derive(Clone, Copy, Debug)]
+struct Sample {
+    point: DVec3,
+    radius: f64,
+}
+
+/// The surface's nodes for the collision check, about [`COLLISION_SPACING`] of the
+/// finger apart, uniform in polar angle.
+fn collision_samples(shape: &Shape, pose: &Pose, gripper: &Gripper) -> Vec<Sample> {
+    let spacing = COLLISION_SPACING * gripper.finger_width.min(gripper.thickness());
+    let around = TAU * shape.a1.max(shape.a2) * (1.0 + shape.a4);
+    let section = TAU * shape.a1.max(shape.a2).max(shape.a3);
+    let count =
+        |length: f64, lo: usize, hi: usize| ((length / spacing).ceil() as usize).clamp(lo, hi);
+    let (n_eta, n_omega) = (count(section, 16, 64), count(around, 32, 128));
+    let closed = shape.a4 >= 1.0;
+    // an open surface's rows run from one axis point to the other, both included
+    let phi_max = polar_to_parameter(shape.eta_range(), 1.0 / shape.eps1);
+    let rows = if closed { n_eta } else { n_eta + 1 };
+    let mut points = Vec::with_capacity(rows * n_omega);
+    for i in 0..rows {
+        let phi = if closed {
+            -PI + TAU * i as f64 / n_eta as f64
+        } else {
+            -phi_max + 2.0 * phi_max * i as f64 / n_eta as f64
+        };
+        let eta = polar_to_parameter(phi, shape.eps1);
+        for j in 0..n_omega {
+            let omega = polar_to_parameter(-PI + TAU * j as f64 / n_omega as f64, shape.eps2);
+            points.push(pose.to_world(super::surface::surface_point(shape, eta, omega)));
+        }
+    }
+    let at = |i: usize, j: usize| points[(i % rows) * n_omega + j % n_omega];
+    let cells = if closed { rows } else { rows - 1 };
+    let mut radius = vec![0.0f64; points.len()];
+    for i in 0..cells {
+        for j in 0..n_omega {
+            let half_diagonal = at(i, j)
+                .distance(at(i + 1, j + 1))
+                .max(at(i + 1, j).distance(at(i, j + 1)))
+                / 2.0;
+            for (di, dj) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+                let k = ((i + di) % rows) * n_omega + (j + dj) % n_omega;
+                radius[k] = radius[k].max(half_diagonal);
+            }
+        }
+    }
+    points
+        .into_iter()
+        .zip(radius)
+        .map(|(point, radius)| Sample { point, radius })
+        .collect()
+}
+
+fn check(
+    request: &GraspRequest,
+    candidate: &Candidate,
+    samples: &[Sample],
+) -> Result<Verdict, String> {
+    let GraspRequest {
+        shape,
+        pose,
+        gripper,
+        ..
+    } = *request;
+    let [c1, c2]: [SurfacePoint; 2] = [
+        at_parameters(
+            &shape,
+            &pose,
+            candidate.contacts[0].0,
+            candidate.contacts[0].1,
+        )?,
+        at_parameters(
+            &shape,
+            &pose,
+            candidate.contacts[1].0,
+            candidate.contacts[1].1,
+        )?,
+    ];
+    let (p1, p2) = (DVec3::from_array(c1.point), DVec3::from_array(c2.point));
+    let width = p1.distance(p2);
+    if !gripper.fits(width) {
+        return Ok(Verdict::Drop(|r| &mut r.opening));
+    }
+    let closing = (p2 - p1) / width;
+    let (n1, n2) = (DVec3::from_array(c1.normal), DVec3::from_array(c2.normal));
+    let cone_cos = 1.0 / (1.0 + request.friction * request.friction).sqrt();
+    let worse = n1.dot(-closing).min(n2.dot(closing));
+    if worse < cone_cos {
+        return Ok(Verdict::Drop(|r| &mut r.friction));
+    }
+    let approach = (pose.rotation * candidate.approach)
+        .reject_from_normalized(closing)
+        .normalize();
+    let frame = GraspFrame {
+        position: (p1 + p2) / 2.0,
+        approach,
+        closing,
+        binormal: approach.cross(closing),
+    };
+    if let Some(camera) = request.viewpoint {
+        let towards_camera = (camera - frame.position).normalize_or_zero();
+        if approach.dot(towards_camera) > BEHIND_COSINE {
+            return Ok(Verdict::Drop(|r| &mut r.behind));
+        }
+    }
+    let sweep = 4.0 * shape.size();
+    let mut verdict = None;
+    for posture in &POSTURES {
+        let opening = gripper.pregrasp_opening(width, posture);
+        let tip = posture.tip * gripper.finger_depth;
+        let boxes = hand_boxes(&gripper, opening, tip, sweep);
+        match hand_is_free(&boxes, &frame, samples, request.plane.as_ref()) {
+            Ok(()) => {
+                let depth = insertion_depth(&frame, samples, opening, gripper.finger_width);
+                verdict = Some(Ok((opening, tip, depth)));
+                break;
+            }
+            Err(drop) => verdict = Some(Err(drop)),
+        }
+    }
+    let (opening, tip, depth) = match verdict.expect("at least one posture") {
+        Ok(free) => free,
+        Err(drop) => return Ok(Verdict::Drop(drop)),
+    };
+    let pad = gripper.finger_width / 2.0;
+    let sharpest = |s: &SurfacePoint| s.curvatures[0].abs().max(s.curvatures[1].abs());
+    let terms = ScoreTerms {
+        antipodal: ((worse - cone_cos) / (1.0 - cone_cos)).clamp(0.0, 1.0),
+        flatness: 1.0 / (1.0 + sharpest(&c1).max(sharpest(&c2)) * pad),
+        centred: {
+            let offset = (pose.translation - frame.position).reject_from_normalized(closing);
+            1.0 - (offset.length() / shape.size()).min(1.0)
+        },
+    };
+    let [wa, wf, wc] = SCORE_WEIGHTS;
+    let rotation = DMat3::from_cols(frame.approach, frame.closing, frame.binormal);
+    let q = DQuat::from_mat3(&rotation).normalize();
+    let rows = rotation.transpose().to_cols_array_2d();
+    Ok(Verdict::Keep(Grasp {
+        kind: candidate.kind,
+        score: wa * terms.antipodal + wf * terms.flatness + wc * terms.centred,
+        score_terms: terms,
+        position: frame.position.to_array(),
+        approach: frame.approach.to_array(),
+        closing: frame.closing.to_array(),
+        binormal: frame.binormal.to_array(),
+        width,
+        pregrasp_opening: opening,
+        tip_reach: tip,
+        depth,
+        rotation: rows,
+        quaternion_wxyz: [q.w, q.x, q.y, q.z],
+        contacts: [c1.point, c2.point],
+        normals: [c1.normal, c2.normal],
+    }))
+}
+
+/// Where the hand in a posture meets the surface (a sample within its radius of a box)
+/// or goes below the plane, the rejection it counts as.
+fn hand_is_free(
+    boxes: &[FrameBox; 3],
+    frame: &GraspFrame,
+    samples: &[Sample],
+    plane: Option<&Plane>,
+) -> Result<(), fn(&mut Rejections) -> &mut usize> {
+    for s in samples {
+        let local = frame.local(s.point);
+        if boxes.iter().any(|b| b.grown(s.radius).contains(local)) {
+            return Err(|r| &mut r.collision);
+        }
+    }
+    if let Some(plane) = plane {
+        let below = boxes
+            .iter()
+            .flat_map(|b| b.corners())
+            .any(|c| plane.signed_distance(frame.world(c)) < 0.0);
+        if below {
+            return Err(|r| &mut r.plane);
+        }
+    }
+    Ok(())
+}
+
+/// How far the object reaches back from the contact line within the jaws.
+fn insertion_depth(frame: &GraspFrame, samples: &[Sample], opening: f64, finger_width: f64) -> f64 {
+    let mut depth: f64 = 0.0;
+    for s in samples {
+        let local = frame.local(s.point);
+        if local.y.abs() <= opening / 2.0 && local.z.abs() <= finger_width / 2.0 {
+            depth = depth.max(-local.x);
+        }
+    }
+    depth
+}
+
+/// The 17 numbers of a GraspNet-1Billion row: score, width, height (the pad's width),
+/// depth (the fingertips' reach past `position`), the rotation (row-major, columns
+/// approach, closing, binormal), translation, object id.
+pub fn graspnet_row(grasp: &Grasp, gripper: &Gripper, object_id: usize) -> [f64; 17] {
+    let mut row = [0.0; 17];
+    row[0] = grasp.score;
+    row[1] = grasp.width;
+    row[2] = gripper.finger_width;
+    row[3] = grasp.tip_reach;
+    for (i, r) in grasp.rotation.iter().enumerate() {
+        row[4 + 3 * i..7 + 3 * i].copy_from_slice(r);
+    }
+    row[13..16].copy_from_slice(&grasp.position);
+    row[16] = object_id as f64;
+    row
+}
