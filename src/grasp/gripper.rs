@@ -115,7 +115,8 @@ impl Gripper {
     }
 }
 
-/// An oriented box in the grasp frame: [lo, hi] along (a, b, c).
+/// An oriented box in the grasp frame: [lo, hi] along (a, b, c); the hand's boxes are
+/// symmetric about c = 0.
 #[derive(Clone, Copy, Debug)]
 pub struct FrameBox {
     pub lo: DVec3,

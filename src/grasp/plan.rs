@@ -23,6 +23,7 @@ use super::gripper::{FrameBox, GraspFrame, Gripper, POSTURES, hand_boxes};
 use super::surface::{SurfacePoint, at_parameters};
 use crate::model::{Plane, Pose, Shape, signed_pow};
 use glam::{DMat3, DQuat, DVec3};
+use rayon::prelude::*;
 use serde::Serialize;
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
@@ -230,8 +231,13 @@ pub fn plan(request: &GraspRequest) -> Result<GraspPlan, String> {
     let all = candidates(&shape);
     let mut rejected = Rejections::default();
     let mut kept = Vec::new();
-    for candidate in &all {
-        match check(request, candidate, &samples)? {
+    // candidates are independent: checked in parallel, collected in their order
+    let verdicts: Vec<Result<Verdict, String>> = all
+        .par_iter()
+        .map(|candidate| check(request, candidate, &samples))
+        .collect();
+    for verdict in verdicts {
+        match verdict? {
             Verdict::Keep(g) => kept.push(g),
             Verdict::Drop(field) => *field(&mut rejected) += 1,
         }
@@ -276,6 +282,18 @@ fn collision_samples(shape: &Shape, pose: &Pose, gripper: &Gripper) -> Vec<Sampl
     // an open surface's rows run from one axis point to the other, both included
     let phi_max = polar_to_parameter(shape.eta_range(), 1.0 / shape.eps1);
     let rows = if closed { n_eta } else { n_eta + 1 };
+    // eq. (2) separates: the signed powers of each row and column once, not per node
+    let powers = |angle: f64, eps: f64| {
+        let (s, c) = angle.sin_cos();
+        let snap = |v: f64| if v.abs() < 1e-14 { 0.0 } else { v };
+        (signed_pow(snap(c), eps), signed_pow(snap(s), eps))
+    };
+    let columns: Vec<(f64, f64)> = (0..n_omega)
+        .map(|j| {
+            let phi = -PI + TAU * j as f64 / n_omega as f64;
+            powers(polar_to_parameter(phi, shape.eps2), shape.eps2)
+        })
+        .collect();
     let mut points = Vec::with_capacity(rows * n_omega);
     for i in 0..rows {
         let phi = if closed {
@@ -283,10 +301,15 @@ fn collision_samples(shape: &Shape, pose: &Pose, gripper: &Gripper) -> Vec<Sampl
         } else {
             -phi_max + 2.0 * phi_max * i as f64 / n_eta as f64
         };
-        let eta = polar_to_parameter(phi, shape.eps1);
-        for j in 0..n_omega {
-            let omega = polar_to_parameter(-PI + TAU * j as f64 / n_omega as f64, shape.eps2);
-            points.push(pose.to_world(super::surface::surface_point(shape, eta, omega)));
+        let (c_eta, s_eta) = powers(polar_to_parameter(phi, shape.eps1), shape.eps1);
+        let radius = shape.a4 + c_eta;
+        for &(c_om, s_om) in &columns {
+            let p = DVec3::new(
+                shape.a1 * radius * c_om,
+                shape.a2 * radius * s_om,
+                shape.a3 * s_eta,
+            );
+            points.push(pose.to_world(p));
         }
     }
     let at = |i: usize, j: usize| points[(i % rows) * n_omega + j % n_omega];
@@ -423,8 +446,16 @@ fn hand_is_free(
     samples: &[Sample],
     plane: Option<&Plane>,
 ) -> Result<(), fn(&mut Rejections) -> &mut usize> {
+    // every box spans the same binormal slab |c| <= finger_width/2: test that first, it
+    // leaves out most of the surface
+    let half_slab = boxes[0].hi.z;
     for s in samples {
-        let local = frame.local(s.point);
+        let d = s.point - frame.position;
+        let z = d.dot(frame.binormal);
+        if z.abs() > half_slab + s.radius {
+            continue;
+        }
+        let local = DVec3::new(d.dot(frame.approach), d.dot(frame.closing), z);
         if boxes.iter().any(|b| b.grown(s.radius).contains(local)) {
             return Err(|r| &mut r.collision);
         }
