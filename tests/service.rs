@@ -4,7 +4,6 @@
 use base64::Engine;
 use reqwest::blocking::{Client, multipart};
 use serde_json::{Value, json};
-use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::Command;
 use supertoroid::eval::Backend;
@@ -12,56 +11,8 @@ use supertoroid::model::{Pose, Shape};
 use supertoroid::service::ServiceConfig;
 use supertoroid::synth::{self, Camera, Intrinsics};
 
-/// A server on 127.0.0.1:<free port>, stopped when dropped.
-struct Server {
-    addr: SocketAddr,
-    stop: Option<tokio::sync::oneshot::Sender<()>>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl Server {
-    fn start(config: ServiceConfig) -> Self {
-        let (addr_tx, addr_rx) = std::sync::mpsc::channel();
-        let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-        let thread = std::thread::spawn(move || {
-            let runtime = tokio::runtime::Builder::new_multi_thread()
-                .worker_threads(2)
-                .enable_all()
-                .build()
-                .unwrap();
-            runtime.block_on(async move {
-                let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-                addr_tx.send(listener.local_addr().unwrap()).unwrap();
-                supertoroid::service::serve_on(listener, config, async {
-                    let _ = stop_rx.await;
-                })
-                .await
-                .unwrap();
-            });
-        });
-        let addr = addr_rx.recv().unwrap();
-        Self {
-            addr,
-            stop: Some(stop_tx),
-            thread: Some(thread),
-        }
-    }
-
-    fn url(&self, path: &str) -> String {
-        format!("http://{}{path}", self.addr)
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        if let Some(s) = self.stop.take() {
-            let _ = s.send(());
-        }
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
+mod common;
+use common::{Server, client};
 
 /// A ground-truth case's cloud as JSON points.
 fn case_points(seed: u64, partial: bool, noise: f64, outliers: f64) -> Vec<[f64; 3]> {
@@ -98,13 +49,6 @@ fn metrics_text(c: &Client, server: &Server) -> String {
         .send()
         .unwrap()
         .text()
-        .unwrap()
-}
-
-fn client() -> Client {
-    Client::builder()
-        .timeout(std::time::Duration::from_secs(120))
-        .build()
         .unwrap()
 }
 

@@ -5,6 +5,7 @@
 
 mod differential;
 mod distance;
+mod object;
 mod plane;
 mod shape;
 
@@ -16,6 +17,7 @@ pub use distance::{
     MeridianPoint, ResidualGradient, meridian_distance, meridian_distance_stepwise,
     meridian_residual_with_gradient,
 };
+pub use object::{FittedObject, PoseIn};
 pub use plane::Plane;
 pub use shape::{
     Pose, Shape, ShapeBounds, mean_superellipse_point, mean_superellipse_radius, parse_floats,

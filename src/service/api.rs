@@ -84,6 +84,10 @@ pub struct FitRequestOptions {
     pub method: Option<crate::fit::Method>,
     /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
     pub format: Option<Format>,
+    /// plan parallel-jaw grasps on the fit (JSON bodies only): the gripper and the
+    /// options of `/v1/grasps`; the fit's viewpoint is the camera unless one is given
+    #[param(ignore)]
+    pub grasps: Option<crate::grasp::GraspOptions>,
 }
 
 /// Known shape parameters as a JSON object `{"a1": 0.05}` or as text `"a1:0.05"`.
@@ -205,12 +209,14 @@ pub struct FitRequest {
     pub options: FitRequestOptions,
 }
 
-/// `supertoroid fit`'s JSON plus the request id.
+/// `supertoroid fit`'s JSON plus the request id (and the grasps, where asked for).
 #[derive(Serialize, ToSchema)]
 pub struct FitResponse {
     pub request_id: String,
     #[serde(flatten)]
     pub fit: FitReport,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub grasps: Option<crate::grasp::GraspsOut>,
 }
 
 /// Many clouds in one request.
@@ -225,6 +231,8 @@ pub struct BatchRequest {
 pub struct BatchItem {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fit: Option<FitReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub grasps: Option<crate::grasp::GraspsOut>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<ErrorDetail>,
 }
@@ -277,7 +285,16 @@ pub struct Health {
             Shapes and poses as in the README: world = R·canonical + t, canonical z the hole axis."
     ),
     paths(
-        fit_cloud, fit_depth, fit_batch, healthz, readyz, metrics, openapi, index
+        fit_cloud,
+        fit_depth,
+        fit_batch,
+        super::geometry::surface,
+        super::geometry::grasps,
+        healthz,
+        readyz,
+        metrics,
+        openapi,
+        index
     ),
     components(schemas(
         FitRequest,
@@ -287,6 +304,10 @@ pub struct Health {
         BatchResponse,
         BatchItem,
         DepthFitRequest,
+        super::geometry::SurfaceRequest,
+        super::geometry::SurfaceResponse,
+        super::geometry::GraspsRequest,
+        super::geometry::GraspsResponse,
         ErrorBody,
         ErrorDetail,
         Readiness,
@@ -305,6 +326,8 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/fit", post(fit_cloud))
         .route("/v1/fit/depth", post(fit_depth))
         .route("/v1/fit/batch", post(fit_batch))
+        .route("/v1/surface", post(super::geometry::surface))
+        .route("/v1/grasps", post(super::geometry::grasps))
         .fallback(not_found)
         .layer(axum::extract::DefaultBodyLimit::max(
             state.config.body_limit,
@@ -399,7 +422,7 @@ async fn observe(State(state): Shared, mut request: Request, next: Next) -> Resp
     response
 }
 
-async fn read_body(state: &AppState, body: Body) -> Result<Bytes, ApiError> {
+pub(super) async fn read_body(state: &AppState, body: Body) -> Result<Bytes, ApiError> {
     axum::body::to_bytes(body, state.config.body_limit)
         .await
         .map_err(|e| {
@@ -414,7 +437,7 @@ async fn read_body(state: &AppState, body: Body) -> Result<Bytes, ApiError> {
         })
 }
 
-fn content_type(headers: &HeaderMap) -> String {
+pub(super) fn content_type(headers: &HeaderMap) -> String {
     headers
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())
@@ -455,14 +478,22 @@ async fn fit_one(state: &AppState, job: FitJob) -> Result<FitReport, ApiError> {
     Ok(report)
 }
 
-fn respond(id: RequestId, fit: FitReport) -> Json<FitResponse> {
+fn respond(
+    id: RequestId,
+    fit: FitReport,
+    grasps: Option<&crate::grasp::GraspOptions>,
+) -> Result<Json<FitResponse>, ApiError> {
     for warning in &fit.warnings {
         tracing::warn!(request_id = %id.0, "{warning}");
     }
-    Json(FitResponse {
+    let grasps = grasps
+        .map(|options| super::geometry::grasps_of_fit(&fit, options))
+        .transpose()?;
+    Ok(Json(FitResponse {
         request_id: id.0,
         fit,
-    })
+        grasps,
+    }))
 }
 
 /// Fit one cloud.
@@ -500,9 +531,11 @@ async fn fit_cloud(
         .map_err(|e| ApiError::unprocessable("invalid_option", e.body_text()))?
         .0;
     let bytes = read_body(&state, body).await?;
+    let mut grasps = None;
     let job = if kind == "application/json" {
         let request: FitRequest = serde_json::from_slice(&bytes).map_err(ApiError::from_json)?;
         let points = points_from_json(&state, &request.points)?;
+        grasps = super::geometry::checked_grasp_options(request.options.grasps.clone())?;
         request.options.job(points, state.config.max_points)?
     } else if matches!(
         kind.as_str(),
@@ -528,7 +561,7 @@ async fn fit_cloud(
             ),
         ));
     };
-    Ok(respond(id, fit_one(&state, job).await?))
+    respond(id, fit_one(&state, job).await?, grasps.as_ref())
 }
 
 /// Fit the object in a depth frame.
@@ -661,7 +694,8 @@ async fn fit_depth(
         ));
     }
     fit.warnings.extend(notes);
-    Ok(respond(id, fit))
+    let grasps = super::geometry::checked_grasp_options(params.options.grasps.clone())?;
+    respond(id, fit, grasps.as_ref())
 }
 
 /// The default `max_size` of a depth frame's object (metres with a metres-per-unit
@@ -800,28 +834,43 @@ async fn fit_batch(
         ));
     }
     let mut jobs = Vec::new();
+    let mut grasps = Vec::new();
     for cloud in &request.clouds {
         let points = points_from_json(&state, &cloud.points)?;
+        grasps.push(super::geometry::checked_grasp_options(
+            cloud.options.grasps.clone(),
+        )?);
         jobs.push(cloud.options.job(points, state.config.max_points)?);
     }
     let results = state.fitter.run(jobs).await?;
+    let error_item = |e: ApiError| BatchItem {
+        fit: None,
+        grasps: None,
+        error: Some(ErrorDetail {
+            code: e.code.into(),
+            message: e.message,
+        }),
+    };
     let results = results
         .into_iter()
-        .map(|r| match r {
+        .zip(&grasps)
+        .map(|(r, options)| match r {
             Ok(fit) => {
                 state.metrics.record_fit(&fit);
-                BatchItem {
-                    fit: Some(fit),
-                    error: None,
+                let planned = options
+                    .as_ref()
+                    .map(|o| super::geometry::grasps_of_fit(&fit, o))
+                    .transpose();
+                match planned {
+                    Ok(grasps) => BatchItem {
+                        fit: Some(fit),
+                        grasps,
+                        error: None,
+                    },
+                    Err(e) => error_item(e),
                 }
             }
-            Err(e) => BatchItem {
-                fit: None,
-                error: Some(ErrorDetail {
-                    code: e.code.into(),
-                    message: e.message,
-                }),
-            },
+            Err(e) => error_item(e),
         })
         .collect();
     Ok(Json(BatchResponse {

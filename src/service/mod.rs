@@ -5,6 +5,7 @@
 //! * [`fitter`]: admission (bounded queue, 503 when full), the workers, the GPU context
 //!   and the CPU fallback.
 //! * [`api`]: routes, request and response types, content negotiation.
+//! * [`geometry`]: routes on a fitted object: surface queries and grasps.
 //! * [`error`]: the `{"error": {"code", "message"}}` body every failure carries.
 //! * [`metrics`]: the Prometheus registry.
 
@@ -12,6 +13,7 @@ pub mod api;
 pub mod config;
 pub mod error;
 pub mod fitter;
+pub mod geometry;
 pub mod metrics;
 
 pub use config::ServiceConfig;
