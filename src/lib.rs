@@ -12,6 +12,7 @@
 //! * [`io`]: cloud readers and writers.
 //! * [`fit`], [`solve`]: the two-stage fit and its interior-point solver.
 //! * [`grasp`]: surface queries and parallel-jaw grasps on a fitted object.
+//! * [`export`]: fitted objects as meshes, MJCF and URDF for simulators and planners.
 //! * [`service`]: the HTTP service (axum).
 //! * [`bench`](mod@bench): the benchmark harness (paper clouds, ground-truth suite, scaling).
 //! * [`render`]: headless pictures of clouds and fits (wgpu render pipeline).
@@ -20,6 +21,7 @@
 pub mod bench;
 pub mod cli;
 pub mod eval;
+pub mod export;
 pub mod fit;
 pub mod grasp;
 pub mod io;

@@ -425,3 +425,97 @@ fn a_gpu_fit_without_a_runtime_dir_prints_no_loader_error() {
     let fit: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(fit["backend"]["kind"], "gpu");
 }
+
+#[test]
+fn grasps_surface_and_export_read_the_fit_json() {
+    let cloud = tmp("g-ring.xyz");
+    let status = bin()
+        .args([
+            "sample",
+            "--shape",
+            "0.015,0.015,0.008,2.5,1,1",
+            "--translation",
+            "0,0,0.5",
+        ])
+        .args([
+            "--points",
+            "2000",
+            "--seed",
+            "2",
+            "-o",
+            cloud.to_str().unwrap(),
+        ])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let (fit, _) = fit_json(&["--viewpoint", "none"], &cloud);
+    let fit_path = tmp("g-fit.json");
+    std::fs::write(&fit_path, fit.to_string()).unwrap();
+    let run = |args: &[&str]| bin().args(args).output().unwrap();
+    let f = fit_path.to_str().unwrap();
+
+    let out = run(&["grasps", f, "--graspnet", "--max-grasps", "5"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let grasps: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let list = grasps["grasps"].as_array().unwrap();
+    assert!(!list.is_empty() && list.len() <= 5, "{grasps}");
+    assert_eq!(grasps["graspnet"].as_array().unwrap().len(), list.len());
+    let width = list[0]["width"].as_f64().unwrap();
+    assert!(width > 0.0 && width <= 0.08);
+
+    let out = run(&["surface", f, "--grid", "4x8"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let surface: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(surface["points"].as_array().unwrap().len(), 32);
+    let out = run(&["surface", f, "--nearest", cloud.to_str().unwrap()]);
+    let surface: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(surface["points"].as_array().unwrap().len(), 2000);
+
+    let dir = tmp("g-scene");
+    let out = run(&[
+        "export",
+        f,
+        "--plane",
+        "0,0,1,-0.492",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mjcf = std::fs::read_to_string(dir.join("scene.xml")).unwrap();
+    assert!(mjcf.contains("<freejoint") && mjcf.contains("type=\"plane\""));
+    assert!(dir.join("scene.urdf").exists() && dir.join("object_0_visual.obj").exists());
+
+    // bad input: exit 2 and one line
+    for args in [
+        vec!["grasps", f, "--max-opening=-1"],
+        vec!["grasps", f, "--plane", "0,0,0,1"],
+        vec!["surface", f],
+        vec!["surface", f, "--grid", "4by8"],
+        vec![
+            "export",
+            f,
+            "--density",
+            "0",
+            "--out",
+            dir.to_str().unwrap(),
+        ],
+        vec!["grasps", cloud.to_str().unwrap()],
+    ] {
+        let out = run(&args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
+    }
+}

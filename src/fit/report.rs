@@ -256,28 +256,9 @@ pub(super) fn median(values: &mut [f64]) -> f64 {
 /// Reads shape and pose back from the JSON of a [`FitReport`] (what `supertoroid fit`
 /// prints and the service answers): `shape`, `pose.translation`, `pose.quaternion_wxyz`.
 pub fn parse_report_json(bytes: &[u8]) -> Result<(Shape, Pose), String> {
-    #[derive(serde::Deserialize)]
-    struct PoseIn {
-        translation: [f64; 3],
-        quaternion_wxyz: [f64; 4],
-    }
-    #[derive(serde::Deserialize)]
-    struct ReportIn {
-        shape: Shape,
-        pose: PoseIn,
-    }
-    let report: ReportIn = serde_json::from_slice(bytes).map_err(|e| e.to_string())?;
-    report.shape.validate()?;
-    let [w, x, y, z] = report.pose.quaternion_wxyz;
-    let q = glam::DQuat::from_xyzw(x, y, z, w);
-    if !q.is_finite() || q.length() < 1e-9 || !report.pose.translation.iter().all(|v| v.is_finite())
-    {
-        return Err("pose has a non-finite or zero quaternion or translation".into());
-    }
-    Ok((
-        report.shape,
-        Pose::new(q.normalize(), DVec3::from_array(report.pose.translation)),
-    ))
+    let object: crate::model::FittedObject =
+        serde_json::from_slice(bytes).map_err(|e| e.to_string())?;
+    object.validated()
 }
 
 #[cfg(test)]

@@ -10,6 +10,8 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+mod objects;
+
 #[derive(Parser, Debug)]
 #[command(name = "supertoroid", version, about = "Fit supertoroids to 3D point clouds", long_about = None)]
 pub struct Cli {
@@ -59,6 +61,21 @@ pub enum Command {
     ///
     /// Example: supertoroid render mug.pcd -o mug.png   (fits first; or --fit fit.json)
     Render(RenderArgs),
+    /// Plan parallel-jaw grasps on a fit (the JSON `fit` printed) and print them as JSON,
+    /// best first (the gripper defaults to a Franka-Hand-like one, in metres).
+    ///
+    /// Example: supertoroid grasps fit.json --max-opening 0.08 --plane 0,0,1,0 --graspnet
+    Grasps(objects::GraspArgs),
+    /// Print points of a fit's surface with normals, principal curvatures and directions
+    /// as JSON: on a grid, or nearest to the points of a cloud file.
+    ///
+    /// Example: supertoroid surface fit.json --grid 16x32
+    Surface(objects::SurfaceArgs),
+    /// Write fitted objects for simulators and planners: OBJ and STL meshes, an MJCF
+    /// scene for MuJoCo and a URDF, into --out.
+    ///
+    /// Example: supertoroid export fit.json --plane 0,0,1,0 --out scene/
+    Export(objects::ExportArgs),
 }
 
 #[derive(Args, Debug)]
@@ -379,6 +396,9 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
         Command::Serve(config) => serve(config),
         Command::Bench(args) => bench(args),
         Command::Render(args) => render(args),
+        Command::Grasps(args) => objects::grasps(args),
+        Command::Surface(args) => objects::surface(args),
+        Command::Export(args) => objects::export(args),
     }
 }
 
@@ -531,7 +551,7 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
     }
 }
 
-fn internal(e: impl std::fmt::Display) -> Failure {
+pub(crate) fn internal(e: impl std::fmt::Display) -> Failure {
     Failure {
         code: 1,
         message: e.to_string(),

@@ -1,0 +1,173 @@
+//! Fitted objects out to simulators and planners: each object's surface as an OBJ mesh,
+//! its collision geometry as STL pieces (convex by piece: a ring is cut into arcs, see
+//! [`meshes::RING_PIECES`]), and the scene as MJCF (MuJoCo: free bodies on the table
+//! plane under gravity) and URDF (planners' collision scenes: objects fixed to `world`).
+//!
+//! Everything is written in the fits' frame (the camera's for depth frames) or, given
+//! `world_from_frame`, in a world frame. Gravity is along the table's normal where the
+//! table is known, else along -z of the output frame.
+
+pub mod meshes;
+mod mjcf;
+mod urdf;
+
+use crate::model::{Plane, Pose, Shape};
+use glam::{DMat3, DVec3};
+use std::path::{Path, PathBuf};
+
+/// Default density of the objects, kg/m³ (plastic and cardboard lie around 200-1200).
+pub const DEFAULT_DENSITY: f64 = 500.0;
+
+pub struct ExportObject {
+    pub shape: Shape,
+    /// canonical -> output frame
+    pub pose: Pose,
+}
+
+pub struct SceneExport {
+    pub objects: Vec<ExportObject>,
+    pub plane: Option<Plane>,
+    pub density: f64,
+}
+
+impl SceneExport {
+    /// Objects and plane given in the fits' frame, moved into a world frame.
+    pub fn new(
+        objects: Vec<(Shape, Pose)>,
+        plane: Option<Plane>,
+        world_from_frame: Option<Pose>,
+        density: f64,
+    ) -> Result<Self, String> {
+        if objects.is_empty() {
+            return Err("nothing to export: no objects".into());
+        }
+        if !(density.is_finite() && density > 0.0) {
+            return Err(format!("density must be positive, got {density}"));
+        }
+        let to_world = world_from_frame.unwrap_or(Pose::IDENTITY);
+        let objects = objects
+            .into_iter()
+            .map(|(shape, pose)| ExportObject {
+                shape,
+                pose: Pose::new(
+                    to_world.rotation * pose.rotation,
+                    to_world.to_world(pose.translation),
+                ),
+            })
+            .collect();
+        let plane = plane
+            .map(|p| {
+                let p = p.validated()?;
+                // a point of the plane and its normal, moved
+                let n = p.normal();
+                let point = -n * p.offset;
+                Ok::<_, String>(Plane::through(
+                    to_world.to_world(point),
+                    to_world.rotation * n,
+                ))
+            })
+            .transpose()?;
+        Ok(Self {
+            objects,
+            plane,
+            density,
+        })
+    }
+
+    pub fn gravity(&self) -> DVec3 {
+        match &self.plane {
+            Some(p) => -9.81 * p.normal(),
+            None => DVec3::new(0.0, 0.0, -9.81),
+        }
+    }
+
+    /// The point of the table under the objects (their centroid's projection).
+    fn table_point(&self, plane: &Plane) -> DVec3 {
+        let centroid = self
+            .objects
+            .iter()
+            .map(|o| o.pose.translation)
+            .sum::<DVec3>()
+            / self.objects.len() as f64;
+        centroid - plane.normal() * plane.signed_distance(centroid)
+    }
+}
+
+/// The inertial properties of one object in its body frame.
+pub(crate) struct Inertial {
+    pub mass: f64,
+    pub com: DVec3,
+    pub inertia: DMat3,
+}
+
+pub(crate) fn inertial(shape: &Shape, density: f64) -> Inertial {
+    let (volume, com, inertia) = meshes::mass_properties(&meshes::visual(shape));
+    Inertial {
+        mass: volume * density,
+        com,
+        inertia: inertia * density,
+    }
+}
+
+pub(crate) fn object_name(i: usize) -> String {
+    format!("object_{i}")
+}
+
+/// Writes `scene.xml` (MJCF), `scene.urdf` and each object's meshes into `dir`; returns
+/// the files written.
+pub fn write(scene: &SceneExport, dir: &Path) -> Result<Vec<PathBuf>, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut written = Vec::new();
+    let mut file = |name: &str, write: &dyn Fn(&mut dyn std::io::Write) -> std::io::Result<()>| {
+        let path = dir.join(name);
+        let mut out = std::io::BufWriter::new(
+            std::fs::File::create(&path).map_err(|e| format!("{}: {e}", path.display()))?,
+        );
+        write(&mut out)
+            .and_then(|_| std::io::Write::flush(&mut out))
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        written.push(path);
+        Ok::<_, String>(())
+    };
+    let mut pieces = Vec::new();
+    for (i, object) in scene.objects.iter().enumerate() {
+        let name = object_name(i);
+        let visual = meshes::visual(&object.shape);
+        file(&format!("{name}_visual.obj"), &|out| {
+            meshes::write_obj(&mut WriteRef(out), &visual)
+        })?;
+        let object_pieces = meshes::collision_pieces(&object.shape);
+        for (k, piece) in object_pieces.iter().enumerate() {
+            file(&format!("{name}_piece_{k:02}.stl"), &|out| {
+                if object.shape.has_hole() {
+                    meshes::write_stl_points(&mut WriteRef(out), piece, meshes::PIECE_GRID.0)
+                } else {
+                    let triangles: Vec<[DVec3; 3]> = visual
+                        .triangles
+                        .iter()
+                        .map(|t| t.map(|v| visual.vertices[v as usize]))
+                        .collect();
+                    meshes::write_stl(&mut WriteRef(out), &triangles)
+                }
+            })?;
+        }
+        pieces.push(object_pieces.len());
+    }
+    let mjcf = mjcf::document(scene, &pieces);
+    file("scene.xml", &|out| out.write_all(mjcf.as_bytes()))?;
+    let urdf = urdf::document(scene, &pieces);
+    file("scene.urdf", &|out| out.write_all(urdf.as_bytes()))?;
+    Ok(written)
+}
+
+/// `&mut dyn Write` as a sized writer for the mesh writers' generic parameter.
+struct WriteRef<'a>(&'a mut dyn std::io::Write);
+
+impl std::io::Write for WriteRef<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.0.flush()
+    }
+}
