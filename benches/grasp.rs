@@ -32,7 +32,7 @@ fn bench_grasps(c: &mut Criterion) {
             gripper: Gripper::FRANKA_LIKE,
             friction: 0.5,
             plane: Some(Plane::through(DVec3::new(0.0, 0.0, 0.6), DVec3::Z)),
-            viewpoint: Some(DVec3::ZERO),
+            viewpoint: Some(DVec3::new(0.0, -0.4, 1.1)),
             max_grasps: 10,
         };
         group.bench_with_input(BenchmarkId::new("plan", name), &request, |b, r| {

@@ -333,3 +333,45 @@ fn graspnet_rows_carry_the_grasp() {
     // the rotation's first column is the approach
     assert_eq!([row[4], row[7], row[10]], g.approach);
 }
+
+#[test]
+fn the_implicit_normal_agrees_with_the_jet_off_the_seams_and_holds_on_them() {
+    let shapes = [
+        Shape::new(1.0, 0.7, 0.5, 2.0, 0.6, 1.4),
+        Shape::new(1.0, 1.3, 0.8, 0.0, 1.8, 0.3),
+    ];
+    for shape in shapes {
+        for (eta, omega) in [(0.3, 0.4), (1.0, -1.1), (-0.7, 2.9), (-1.2, -0.2)] {
+            let jet = surface::at_parameters(&shape, &Pose::IDENTITY, eta, omega).unwrap();
+            let p = DVec3::from_array(jet.point);
+            let n = surface::implicit_normal(&shape, p).unwrap();
+            assert!(
+                n.dot(DVec3::from_array(jet.normal)) > 1.0 - 1e-9,
+                "{shape:?} at {eta}, {omega}"
+            );
+        }
+    }
+    // the top of a section with eps1 = 1.8 (smooth there, but its normal turns slowly
+    // beside the seam): exactly vertical
+    let shape = Shape::new(0.02, 0.02, 0.01, 2.5, 1.8, 1.0);
+    let top =
+        surface::at_parameters(&shape, &Pose::IDENTITY, std::f64::consts::FRAC_PI_2, 0.3).unwrap();
+    assert!(
+        top.seam && DVec3::from_array(top.normal).dot(DVec3::Z) > 1.0 - 1e-12,
+        "{top:?}"
+    );
+}
+
+#[test]
+fn grasps_planned_on_fits_hold_on_the_true_surface() {
+    // a small slice of `bench grasps` (which reports the whole suite): fits of full and
+    // single-view clouds, noise-free and noisy
+    let report =
+        supertoroid::bench::grasps::run(12, 260_000, supertoroid::eval::Backend::Cpu).unwrap();
+    let (valid, grasped) = report.valid_among_right_fits(|_| true);
+    assert!(grasped >= 10, "{grasped} of 12 fits have a grasp");
+    assert!(
+        valid + 1 >= grasped,
+        "{valid} of {grasped} grasps hold on the truth"
+    );
+}

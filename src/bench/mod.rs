@@ -1,8 +1,9 @@
 //! The benchmark harness behind `supertoroid bench`: the paper's table on real clouds
 //! ([`paper`]), the ground-truth suite ([`synthetic`]) and evaluator scaling
-//! ([`scaling`]). Every sub-bench returns a serialisable report and writes it as JSON and
+//! ([`scaling`]), and grasps planned on fits checked on the truth ([`grasps`]). Every sub-bench returns a serialisable report and writes it as JSON and
 //! CSV (for machines) and markdown (for people), with the machine and git revision.
 
+pub mod grasps;
 pub mod paper;
 pub mod plot;
 pub mod scaling;

@@ -157,6 +157,14 @@ pub enum BenchCommand {
         #[arg(long)]
         from_truth: bool,
     },
+    /// The ground-truth suite's cases fitted, the best grasp planned on each fit and
+    /// checked on the true surface (contacts within 2 mm, antipodal there).
+    Grasps {
+        #[arg(long, default_value_t = 180)]
+        cases: usize,
+        #[arg(long, default_value_t = crate::bench::synthetic::DEFAULT_SEED)]
+        seed: u64,
+    },
     /// Time per solver iteration against points and candidates, per backend.
     Scaling {
         /// comma-separated point counts
@@ -679,6 +687,10 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
                 render.as_ref(),
             )
             .map_err(Failure::input)?;
+            write(&|d| write_report(d, &r), r.markdown())
+        }
+        BenchCommand::Grasps { cases, seed } => {
+            let r = crate::bench::grasps::run(*cases, *seed, backend).map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }
         BenchCommand::Scaling {

@@ -4,9 +4,12 @@
 //! * [`surface`]: the surface's differential geometry in the world frame, on a grid, at
 //!   parameters, or nearest to points.
 //! * [`gripper`]: the gripper's parameters and the boxes its fingers and palm sweep.
+//! * [`collision`]: whether the hand meets the surface (bounding spheres of cells,
+//!   split near the hand).
 //! * [`plan`]: candidate grasps from the shape, checked (opening, friction cone,
 //!   collisions with the surface and the support plane, approach from behind) and ranked.
 
+pub mod collision;
 pub mod gripper;
 pub mod plan;
 pub mod surface;

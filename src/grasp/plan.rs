@@ -19,9 +19,10 @@
 //! would go through the support plane, or it comes from behind the object as the camera
 //! sees it. Everything is deterministic: the same object gives the same list.
 
+use super::collision::SurfaceCells;
 use super::gripper::{FrameBox, GraspFrame, Gripper, POSTURES, hand_boxes};
 use super::surface::{SurfacePoint, at_parameters};
-use crate::model::{Plane, Pose, Shape, signed_pow};
+use crate::model::{Plane, Pose, Shape};
 use glam::{DMat3, DQuat, DVec3};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -33,13 +34,11 @@ pub const PINCHES_AROUND: usize = 16;
 pub const BODY_DIRECTIONS: usize = 8;
 /// Side approaches for the grasps across a superellipsoid's axis.
 pub const SIDE_APPROACHES: usize = 8;
-/// The collision check samples the surface on a grid about this fraction of the finger's
-/// width apart (at least 16 x 32 nodes, at most 64 x 128), and grows the hand's boxes by
-/// half the grid's longest cell diagonal, so that no part of the surface between the
-/// nodes can reach into a box unseen.
-pub const COLLISION_SPACING: f64 = 0.25;
 /// An approach pointing towards the camera by more than this cosine comes from behind.
 pub const BEHIND_COSINE: f64 = 0.25;
+/// The contact normals are checked over this part of the pad's width (or of the
+/// thinnest half-axis, where smaller) around each contact.
+pub const PAD_REACH: f64 = 0.25;
 /// Weights of the score's terms: antipodality, flatness at the contacts, centring.
 pub const SCORE_WEIGHTS: [f64; 3] = [0.5, 0.25, 0.25];
 
@@ -227,14 +226,14 @@ enum Verdict {
 pub fn plan(request: &GraspRequest) -> Result<GraspPlan, String> {
     validate(request)?;
     let GraspRequest { shape, pose, .. } = *request;
-    let samples = collision_samples(&shape, &pose, &request.gripper);
+    let cells = SurfaceCells::new(&shape, &pose, &request.gripper);
     let all = candidates(&shape);
     let mut rejected = Rejections::default();
     let mut kept = Vec::new();
     // candidates are independent: checked in parallel, collected in their order
     let verdicts: Vec<Result<Verdict, String>> = all
         .par_iter()
-        .map(|candidate| check(request, candidate, &samples))
+        .map(|candidate| check(request, candidate, &cells))
         .collect();
     for verdict in verdicts {
         match verdict? {
@@ -252,92 +251,10 @@ pub fn plan(request: &GraspRequest) -> Result<GraspPlan, String> {
     })
 }
 
-/// The angle of eq. (2)'s parameter whose point lies at polar angle `phi` of a
-/// superellipse of exponent `eps` (and back with 1/eps): nodes uniform in polar angle are
-/// spread evenly over flat faces and corners alike, where nodes uniform in the parameter
-/// crowd into the corners of small-eps shapes.
-fn polar_to_parameter(phi: f64, eps: f64) -> f64 {
-    let (s, c) = phi.sin_cos();
-    signed_pow(s, 1.0 / eps).atan2(signed_pow(c, 1.0 / eps))
-}
-
-/// A collision sample: a node of the surface and the radius within which every surface
-/// point of its adjacent cells lies (half the longest cell diagonal).
-#[derive(Clone, Copy, Debug)]
-struct Sample {
-    point: DVec3,
-    radius: f64,
-}
-
-/// The surface's nodes for the collision check, about [`COLLISION_SPACING`] of the
-/// finger apart, uniform in polar angle.
-fn collision_samples(shape: &Shape, pose: &Pose, gripper: &Gripper) -> Vec<Sample> {
-    let spacing = COLLISION_SPACING * gripper.finger_width.min(gripper.thickness());
-    let around = TAU * shape.a1.max(shape.a2) * (1.0 + shape.a4);
-    let section = TAU * shape.a1.max(shape.a2).max(shape.a3);
-    let count =
-        |length: f64, lo: usize, hi: usize| ((length / spacing).ceil() as usize).clamp(lo, hi);
-    let (n_eta, n_omega) = (count(section, 16, 64), count(around, 32, 128));
-    let closed = shape.a4 >= 1.0;
-    // an open surface's rows run from one axis point to the other, both included
-    let phi_max = polar_to_parameter(shape.eta_range(), 1.0 / shape.eps1);
-    let rows = if closed { n_eta } else { n_eta + 1 };
-    // eq. (2) separates: the signed powers of each row and column once, not per node
-    let powers = |angle: f64, eps: f64| {
-        let (s, c) = angle.sin_cos();
-        let snap = |v: f64| if v.abs() < 1e-14 { 0.0 } else { v };
-        (signed_pow(snap(c), eps), signed_pow(snap(s), eps))
-    };
-    let columns: Vec<(f64, f64)> = (0..n_omega)
-        .map(|j| {
-            let phi = -PI + TAU * j as f64 / n_omega as f64;
-            powers(polar_to_parameter(phi, shape.eps2), shape.eps2)
-        })
-        .collect();
-    let mut points = Vec::with_capacity(rows * n_omega);
-    for i in 0..rows {
-        let phi = if closed {
-            -PI + TAU * i as f64 / n_eta as f64
-        } else {
-            -phi_max + 2.0 * phi_max * i as f64 / n_eta as f64
-        };
-        let (c_eta, s_eta) = powers(polar_to_parameter(phi, shape.eps1), shape.eps1);
-        let radius = shape.a4 + c_eta;
-        for &(c_om, s_om) in &columns {
-            let p = DVec3::new(
-                shape.a1 * radius * c_om,
-                shape.a2 * radius * s_om,
-                shape.a3 * s_eta,
-            );
-            points.push(pose.to_world(p));
-        }
-    }
-    let at = |i: usize, j: usize| points[(i % rows) * n_omega + j % n_omega];
-    let cells = if closed { rows } else { rows - 1 };
-    let mut radius = vec![0.0f64; points.len()];
-    for i in 0..cells {
-        for j in 0..n_omega {
-            let half_diagonal = at(i, j)
-                .distance(at(i + 1, j + 1))
-                .max(at(i + 1, j).distance(at(i, j + 1)))
-                / 2.0;
-            for (di, dj) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
-                let k = ((i + di) % rows) * n_omega + (j + dj) % n_omega;
-                radius[k] = radius[k].max(half_diagonal);
-            }
-        }
-    }
-    points
-        .into_iter()
-        .zip(radius)
-        .map(|(point, radius)| Sample { point, radius })
-        .collect()
-}
-
 fn check(
     request: &GraspRequest,
     candidate: &Candidate,
-    samples: &[Sample],
+    cells: &SurfaceCells,
 ) -> Result<Verdict, String> {
     let GraspRequest {
         shape,
@@ -365,10 +282,14 @@ fn check(
         return Ok(Verdict::Drop(|r| &mut r.opening));
     }
     let closing = (p2 - p1) / width;
-    let (n1, n2) = (DVec3::from_array(c1.normal), DVec3::from_array(c2.normal));
     let cone_cos = 1.0 / (1.0 + request.friction * request.friction).sqrt();
-    let worse = n1.dot(-closing).min(n2.dot(closing));
-    if worse < cone_cos {
+    // the worse contact's normal over its pad, not only at its centre: a contact on a
+    // rounded edge that a small error of the fit moves off is not antipodal
+    let pad_reach = PAD_REACH * gripper.finger_width.min(shape.thinnest_half_axis());
+    let worse = pad_alignment(&shape, &pose, candidate.contacts[0], -closing, pad_reach).min(
+        pad_alignment(&shape, &pose, candidate.contacts[1], closing, pad_reach),
+    );
+    if !(worse >= cone_cos) {
         return Ok(Verdict::Drop(|r| &mut r.friction));
     }
     let approach = (pose.rotation * candidate.approach)
@@ -386,15 +307,16 @@ fn check(
             return Ok(Verdict::Drop(|r| &mut r.behind));
         }
     }
-    let sweep = 4.0 * shape.size();
+    // every surface point lies within 2·size of the contacts' midpoint
+    let sweep = 2.0 * shape.size();
     let mut verdict = None;
     for posture in &POSTURES {
         let opening = gripper.pregrasp_opening(width, posture);
         let tip = posture.tip * gripper.finger_depth;
         let boxes = hand_boxes(&gripper, opening, tip, sweep);
-        match hand_is_free(&boxes, &frame, samples, request.plane.as_ref()) {
+        match hand_is_free(&boxes, &frame, cells, request.plane.as_ref()) {
             Ok(()) => {
-                let depth = insertion_depth(&frame, samples, opening, gripper.finger_width);
+                let depth = cells.reach_behind(&frame, opening, gripper.finger_width);
                 verdict = Some(Ok((opening, tip, depth)));
                 break;
             }
@@ -438,27 +360,52 @@ fn check(
     }))
 }
 
-/// Where the hand in a posture meets the surface (a sample within its radius of a box)
-/// or goes below the plane, the rejection it counts as.
+/// The least cosine between the outward normal and `outward` at a contact and at the
+/// four surface points `reach` away from it along the parameter curves; NaN-safe (a
+/// normal that is not finite gives -1).
+fn pad_alignment(
+    shape: &Shape,
+    pose: &Pose,
+    (eta, omega): (f64, f64),
+    outward: DVec3,
+    reach: f64,
+) -> f64 {
+    let jet = crate::model::surface_jet(shape, eta + 1e-3, omega + 1e-3);
+    let d_eta = reach / jet.r_eta.length().max(1e-300);
+    let d_omega = reach / jet.r_omega.length().max(1e-300);
+    let (d_eta, d_omega) = (d_eta.min(0.5), d_omega.min(0.5));
+    let mut least: f64 = 1.0;
+    for (de, dom) in [
+        (0.0, 0.0),
+        (d_eta, 0.0),
+        (-d_eta, 0.0),
+        (0.0, d_omega),
+        (0.0, -d_omega),
+    ] {
+        let e = if shape.a4 < 1.0 {
+            (eta + de).clamp(-shape.eta_range(), shape.eta_range())
+        } else {
+            eta + de
+        };
+        let c = match at_parameters(shape, pose, e, omega + dom) {
+            Ok(p) => DVec3::from_array(p.normal).dot(outward),
+            Err(_) => -1.0,
+        };
+        least = least.min(if c.is_finite() { c } else { -1.0 });
+    }
+    least
+}
+
+/// Where the hand in a posture meets the surface or goes below the plane, the
+/// rejection it counts as.
 fn hand_is_free(
     boxes: &[FrameBox; 3],
     frame: &GraspFrame,
-    samples: &[Sample],
+    cells: &SurfaceCells,
     plane: Option<&Plane>,
 ) -> Result<(), fn(&mut Rejections) -> &mut usize> {
-    // every box spans the same binormal slab |c| <= finger_width/2: test that first, it
-    // leaves out most of the surface
-    let half_slab = boxes[0].hi.z;
-    for s in samples {
-        let d = s.point - frame.position;
-        let z = d.dot(frame.binormal);
-        if z.abs() > half_slab + s.radius {
-            continue;
-        }
-        let local = DVec3::new(d.dot(frame.approach), d.dot(frame.closing), z);
-        if boxes.iter().any(|b| b.grown(s.radius).contains(local)) {
-            return Err(|r| &mut r.collision);
-        }
+    if cells.meets(boxes, frame) {
+        return Err(|r| &mut r.collision);
     }
     if let Some(plane) = plane {
         let below = boxes
@@ -470,18 +417,6 @@ fn hand_is_free(
         }
     }
     Ok(())
-}
-
-/// How far the object reaches back from the contact line within the jaws.
-fn insertion_depth(frame: &GraspFrame, samples: &[Sample], opening: f64, finger_width: f64) -> f64 {
-    let mut depth: f64 = 0.0;
-    for s in samples {
-        let local = frame.local(s.point);
-        if local.y.abs() <= opening / 2.0 && local.z.abs() <= finger_width / 2.0 {
-            depth = depth.max(-local.x);
-        }
-    }
-    depth
 }
 
 /// The 17 numbers of a GraspNet-1Billion row: score, width, height (the pad's width),

@@ -144,7 +144,18 @@ fn canonical_query(shape: &Shape, eta: f64, omega: f64) -> Canonical {
         eta_d = eta_d.signum() * (eta_max - SEAM_OFFSET);
         seam = true;
     }
-    let frame = principal_frame(&surface_jet(shape, eta_d, omega_d));
+    let mut frame = principal_frame(&surface_jet(shape, eta_d, omega_d));
+    if (seam || !frame.normal.is_finite())
+        && let Some(n) = implicit_normal(shape, point)
+    {
+        // the seam's own normal where the surface has one (eps < 2): beside the seam
+        // it turns as cos^(2 - eps), too slowly for an offset to stand in for it
+        let d1 = frame.directions[0]
+            .reject_from_normalized(n)
+            .normalize_or(frame.directions[0]);
+        frame.normal = n;
+        frame.directions = [d1, n.cross(d1)];
+    }
     Canonical {
         eta: eta_d,
         omega: omega_d,
@@ -152,6 +163,34 @@ fn canonical_query(shape: &Shape, eta: f64, omega: f64) -> Canonical {
         frame,
         seam,
     }
+}
+
+/// The unit outward normal as the gradient of the inside-outside function (eq. 3) at a
+/// canonical surface point, its two superellipse factors each scaled to a largest
+/// component of 1 (the direction is unchanged and no power under- or overflows). None
+/// where it has no direction: on the axis, at a section centre, at a corner (eps >= 2).
+pub fn implicit_normal(shape: &Shape, p: DVec3) -> Option<DVec3> {
+    let factor = |u: f64, v: f64, eps: f64| -> Option<[f64; 2]> {
+        let m = u.abs().max(v.abs());
+        if m == 0.0 {
+            return None;
+        }
+        let e = 2.0 / eps - 1.0;
+        Some([signed_pow(u / m, e), signed_pow(v / m, e)])
+    };
+    // ∇G's direction in x-y (G is the top-view norm), then the section's (X, Z)
+    let [gx, gy] = factor(p.x / shape.a1, p.y / shape.a2, shape.eps2)?;
+    let (gx, gy) = (gx / shape.a1, gy / shape.a2);
+    let g = shape.top_view_norm(p.x, p.y);
+    let [cx, cz] = factor(g - shape.a4, p.z / shape.a3, shape.eps1)?;
+    // ∂G/∂x = S^(eps2/2 - 1)·(scaled x factor)/a1 with S the scaled sum; put it back
+    let (ux, uy) = (p.x / shape.a1, p.y / shape.a2);
+    let m = ux.abs().max(uy.abs());
+    let s = (ux / m).abs().powf(2.0 / shape.eps2) + (uy / m).abs().powf(2.0 / shape.eps2);
+    let scale = s.powf(shape.eps2 / 2.0 - 1.0);
+    let n = DVec3::new(cx * scale * gx, cx * scale * gy, cz / shape.a3);
+    let n = n.normalize();
+    n.is_finite().then_some(n)
 }
 
 /// An `n_eta` x `n_omega` grid at the cells' centres: omega around the hole axis, eta
