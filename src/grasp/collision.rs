@@ -48,6 +48,8 @@ pub struct SurfaceCells {
     closed: bool,
     /// per cell (row-major), built when first needed
     fine: Vec<std::sync::OnceLock<FineGrid>>,
+    /// per cell (row-major): a sphere around it, tested before its fine grid
+    cell_spheres: Vec<(DVec3, f64)>,
     /// the signed powers of each cell row's and column's fine angles (eq. 2 separates)
     fine_rows: Vec<Vec<(f64, f64)>>,
     fine_columns: Vec<Vec<(f64, f64)>>,
@@ -102,6 +104,7 @@ impl SurfaceCells {
             fine: (0..n_eta * n_omega)
                 .map(|_| std::sync::OnceLock::new())
                 .collect(),
+            cell_spheres: Vec::with_capacity(n_eta * n_omega),
             fine_rows: fine_powers(&row_angles, shape.eps1),
             fine_columns: fine_powers(&column_angles, shape.eps2),
             blocks: Vec::new(),
@@ -114,6 +117,12 @@ impl SurfaceCells {
                 for k in corners {
                     cells.radii[k] = cells.radii[k].max(half_diagonal);
                 }
+                let centre = (a + b + c + d) / 4.0;
+                let reach = [a, b, c, d]
+                    .map(|p| p.distance(centre))
+                    .into_iter()
+                    .fold(0.0, f64::max);
+                cells.cell_spheres.push((centre, BULGE * reach));
             }
         }
         for bi in (0..rows).step_by(BLOCK) {
@@ -193,6 +202,11 @@ impl SurfaceCells {
             for ci in [below, above].into_iter().flatten() {
                 for cj in [(j + cols - 1) % cols, j] {
                     if std::mem::replace(&mut done[ci * cols + cj], true) {
+                        continue;
+                    }
+                    let (centre, reach) = self.cell_spheres[ci * cols + cj];
+                    let local = frame.local(centre);
+                    if !boxes.iter().any(|b| sphere_meets_box(local, reach, b)) {
                         continue;
                     }
                     let fine = self.fine_grid(ci, cj);

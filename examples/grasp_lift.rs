@@ -1,0 +1,60 @@
+//! Writes, for each case of the ground-truth suite, the true object as an MJCF scene
+//! (`export`) and the best grasp planned on its fit (`grasp.json`), for
+//! `scripts/grasp_lift.py` to close a simulated gripper at that grasp in MuJoCo and lift.
+//! `cargo run --release --example grasp_lift -- CASES SEED OUT_DIR`
+
+use supertoroid::bench::grasps::{FRICTION, gripper_for};
+use supertoroid::eval::CpuEvaluator;
+use supertoroid::fit::ground_truth::{compare, make_case};
+use supertoroid::fit::{FitOptions, fit};
+use supertoroid::grasp::{GraspRequest, plan::plan};
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let cases: usize = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(36);
+    let seed: u64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(260_000);
+    let out = std::path::PathBuf::from(args.get(3).map_or("grasp-lift", |s| s.as_str()));
+    let mut evaluator = CpuEvaluator::new();
+    for i in 0..cases {
+        let (partial, noise, outliers) = supertoroid::bench::synthetic::category(i);
+        let case_seed = seed + i as u64;
+        let case = make_case(case_seed, partial, noise, outliers);
+        let options = FitOptions {
+            seed: case_seed,
+            viewpoint: case.viewpoint.into(),
+            ..Default::default()
+        };
+        let report = fit(&mut evaluator, &case.points, &options).expect("fit");
+        let (shape, pose) = report.fitted;
+        let success = compare((&case.shape, &case.pose), (&shape, &pose)).success();
+        let gripper = gripper_for(&case.shape);
+        let planned = plan(&GraspRequest {
+            shape,
+            pose,
+            gripper,
+            friction: FRICTION,
+            plane: None,
+            viewpoint: case.viewpoint,
+            max_grasps: 1,
+        })
+        .expect("plan");
+        let Some(grasp) = planned.grasps.first() else {
+            continue;
+        };
+        let dir = out.join(format!("case-{case_seed}"));
+        let scene = supertoroid::export::SceneExport::new(
+            vec![(case.shape, case.pose)],
+            None,
+            None,
+            supertoroid::export::DEFAULT_DENSITY,
+        )
+        .expect("scene");
+        supertoroid::export::write(&scene, &dir).expect("write");
+        let record = serde_json::json!({
+            "seed": case_seed, "partial": partial, "noise": noise, "outliers": outliers,
+            "fit_success": success, "grasp": grasp, "gripper": gripper,
+            "finger_thickness": gripper.thickness(),
+        });
+        std::fs::write(dir.join("grasp.json"), record.to_string()).expect("grasp.json");
+    }
+}
