@@ -13,6 +13,7 @@
 //! * [`fit`], [`solve`]: the two-stage fit and its interior-point solver.
 //! * [`grasp`]: surface queries and parallel-jaw grasps on a fitted object.
 //! * [`export`]: fitted objects as meshes, MJCF and URDF for simulators and planners.
+//! * [`scene`]: the table found and taken away from a depth frame's box.
 //! * [`service`]: the HTTP service (axum).
 //! * [`bench`](mod@bench): the benchmark harness (paper clouds, ground-truth suite, scaling).
 //! * [`render`]: headless pictures of clouds and fits (wgpu render pipeline).
@@ -27,6 +28,7 @@ pub mod grasp;
 pub mod io;
 pub mod model;
 pub mod render;
+pub mod scene;
 pub mod service;
 pub mod solve;
 pub mod synth;

@@ -320,6 +320,15 @@ pub fn back_project(
     options: &DepthOptions,
     mask: Option<&[bool]>,
 ) -> Result<Vec<DVec3>, CloudError> {
+    back_project_pixels(image, options, mask).map(|p| p.points)
+}
+
+/// [`back_project`] keeping each point's pixel.
+pub fn back_project_pixels(
+    image: &DepthImage,
+    options: &DepthOptions,
+    mask: Option<&[bool]>,
+) -> Result<crate::scene::table::Pixels, CloudError> {
     options.validate(image.width, image.height)?;
     if image.data.len() != image.width as usize * image.height as usize {
         return Err(bad("the depth data does not match the image size"));
@@ -343,6 +352,7 @@ pub fn back_project(
     let [lo, hi] = options.depth_range.unwrap_or([0.0, f64::INFINITY]);
     let k = options.intrinsics;
     let mut points = Vec::new();
+    let mut pixels = Vec::new();
     for v in y0..y0 + roi.height {
         for u in x0..x0 + roi.width {
             let i = (v * image.width + u) as usize;
@@ -359,10 +369,11 @@ pub fn back_project(
                 (v as f64 - k.cy) / k.fy * z,
                 z,
             ));
+            pixels.push((u, v));
         }
     }
     if points.is_empty() {
         return Err(CloudError::NoValidDepth);
     }
-    Ok(points)
+    Ok(crate::scene::table::Pixels { points, pixels })
 }

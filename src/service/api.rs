@@ -217,6 +217,10 @@ pub struct FitResponse {
     pub fit: FitReport,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub grasps: Option<crate::grasp::GraspsOut>,
+    /// depth frames with a box and no mask: the table found in the box and taken away
+    /// (normal towards the camera)
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub table: Option<crate::model::Plane>,
 }
 
 /// Many clouds in one request.
@@ -493,6 +497,7 @@ fn respond(
         request_id: id.0,
         fit,
         grasps,
+        table: None,
     }))
 }
 
@@ -675,7 +680,7 @@ async fn fit_depth(
             format!("max_size must be positive and finite, not {max_size}"),
         ));
     }
-    let (points, notes) = depth_points(&state, &params, depth_bytes, mask_bytes)?;
+    let (points, notes, table) = depth_points(&state, &params, depth_bytes, mask_bytes)?;
     let mut job = params.options.job(points, state.config.max_points)?;
     // a depth frame's points are in the camera's optical frame: the sensor is the origin
     if job.options.viewpoint == Viewpoint::Auto {
@@ -694,8 +699,14 @@ async fn fit_depth(
         ));
     }
     fit.warnings.extend(notes);
-    let grasps = super::geometry::checked_grasp_options(params.options.grasps.clone())?;
-    respond(id, fit, grasps.as_ref())
+    let mut grasps = super::geometry::checked_grasp_options(params.options.grasps.clone())?;
+    // the table found in the box keeps the hand above it
+    if let Some(g) = grasps.as_mut() {
+        g.plane = g.plane.or(table);
+    }
+    let mut response = respond(id, fit, grasps.as_ref())?;
+    response.table = table;
+    Ok(response)
 }
 
 /// The default `max_size` of a depth frame's object (metres with a metres-per-unit
@@ -727,7 +738,7 @@ fn depth_points(
     params: &DepthFitRequest,
     depth: DepthBytes,
     mask: Option<Vec<u8>>,
-) -> Result<(Vec<DVec3>, Vec<String>), ApiError> {
+) -> Result<(Vec<DVec3>, Vec<String>, Option<crate::model::Plane>), ApiError> {
     let intrinsics = params.intrinsics.ok_or_else(|| {
         ApiError::unprocessable(
             "invalid_depth_options",
@@ -756,7 +767,31 @@ fn depth_points(
         roi: params.roi,
         depth_range: params.depth_range,
     };
-    let points = depth::back_project(&image, &options, mask.as_deref())?;
+    let selected = depth::back_project_pixels(&image, &options, mask.as_deref())?;
+    let mut notes: Vec<String> = Vec::new();
+    let mut table = None;
+    // a box without a mask holds the table around the object: take it away
+    let points = if params.roi.is_some() && mask.is_none() {
+        use crate::scene::table::{TableOutcome, remove_table};
+        match remove_table(&selected, params.options.seed.unwrap_or(0)) {
+            TableOutcome::NoTable => selected.points,
+            TableOutcome::Removed { plane, object, .. } => {
+                table = Some(plane);
+                object
+            }
+            TableOutcome::NothingOnIt { left, .. } => {
+                return Err(ApiError::unprocessable(
+                    "no_object_found",
+                    format!(
+                        "the box holds a plane (a table) and nothing on it: {left} of {} points are off the plane",
+                        selected.points.len()
+                    ),
+                ));
+            }
+        }
+    } else {
+        selected.points
+    };
     let pixels = image.width as f64 * image.height as f64;
     if params.roi.is_none() && mask.is_none() && points.len() as f64 > WHOLE_FRAME_SHARE * pixels {
         return Err(ApiError::unprocessable(
@@ -768,9 +803,11 @@ fn depth_points(
             ),
         ));
     }
-    let mut notes: Vec<String> = depth::intrinsics_note(&intrinsics, image.width, image.height)
-        .into_iter()
-        .collect();
+    notes.extend(depth::intrinsics_note(
+        &intrinsics,
+        image.width,
+        image.height,
+    ));
     notes.extend(
         params
             .roi
@@ -783,7 +820,7 @@ fn depth_points(
                 )
             }),
     );
-    Ok((points, notes))
+    Ok((points, notes, table))
 }
 
 /// Fit many clouds in one request; each gets its own result or error.

@@ -246,3 +246,36 @@ fn ray_box(origin: DVec3, dir: DVec3, half: DVec3) -> Option<(f64, f64)> {
     }
     (t1 >= t0.max(0.0)).then_some((t0, t1))
 }
+
+/// A rendered depth image with a table put under it: every pixel whose ray meets the
+/// plane in front of the camera, nearer than what the image holds there (or where it
+/// holds nothing), takes the table's depth. The plane is in world coordinates.
+pub fn with_table(depth: &DepthImage, camera: &Camera, table: &crate::model::Plane) -> DepthImage {
+    let k = camera.intrinsics;
+    let mut out = depth.clone();
+    let eye = camera.pose.translation;
+    for v in 0..k.height {
+        for u in 0..k.width {
+            let ray = k.ray(u as f64, v as f64);
+            let dir = camera.pose.rotation * ray;
+            let along = table.normal().dot(dir);
+            if along.abs() < 1e-12 {
+                continue;
+            }
+            // the ray's parameter t at the plane: optical depth t (the ray has z = 1)
+            let t = -table.signed_distance(eye) / along;
+            if t <= 0.0 {
+                continue;
+            }
+            let value = (t / depth.scale).round();
+            if !(1.0..65535.0).contains(&value) {
+                continue;
+            }
+            let i = (v * k.width + u) as usize;
+            if out.data[i] == 0 || (value as u16) < out.data[i] {
+                out.data[i] = value as u16;
+            }
+        }
+    }
+    out
+}

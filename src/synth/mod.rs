@@ -5,7 +5,7 @@
 mod camera;
 mod sampling;
 
-pub use camera::{Camera, DepthImage, Intrinsics, RenderedView, render_view};
+pub use camera::{Camera, DepthImage, Intrinsics, RenderedView, render_view, with_table};
 pub use sampling::{add_noise, add_outliers, sample_surface, sample_surface_on_grid, subsample};
 
 /// A seeded random generator, the same stream on every platform.

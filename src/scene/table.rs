@@ -1,0 +1,171 @@
+//! The table in a depth frame's box: where a plane holds a good share of the box's
+//! pixels (the table around and under the object) and has the rest on the camera's side
+//! (else it is a face of the object), its pixels and those below it go,
+//! and the object is the largest 8-connected region of what is left, neighbours joined
+//! where their depths differ by less than [`DEPTH_JUMP`] of the depth. What a detector's
+//! box gives: the object and the table around it.
+
+use super::plane::{PlaneFit, fit_plane};
+use crate::model::Plane;
+use glam::DVec3;
+
+/// A plane is the table when it holds at least this share of the box's points.
+pub const MIN_TABLE_SHARE: f64 = 0.15;
+/// Points within this fraction of their depth of the plane are the table's (5 mm at
+/// 1 m: a D435's noise at that range, with room for a table that is not quite flat).
+pub const TABLE_TOLERANCE: f64 = 0.005;
+/// Neighbouring pixels belong together when their depths differ by less than this
+/// fraction of the depth.
+pub const DEPTH_JUMP: f64 = 0.02;
+/// The object must keep at least this many points, and this share of the box's.
+pub const MIN_OBJECT_POINTS: usize = 50;
+pub const MIN_OBJECT_SHARE: f64 = 0.02;
+
+/// Back-projected pixels: points with their pixel positions.
+pub struct Pixels {
+    pub points: Vec<DVec3>,
+    /// (column, row) of each point
+    pub pixels: Vec<(u32, u32)>,
+}
+
+/// What [`remove_table`] did.
+#[derive(Clone, Debug)]
+pub enum TableOutcome {
+    /// no plane holds enough of the box: the points are kept as they are
+    NoTable,
+    /// the table removed: its plane (normal towards the camera), how many points it
+    /// had, and the object's points
+    Removed {
+        plane: Plane,
+        table_points: usize,
+        object: Vec<DVec3>,
+    },
+    /// nothing but the table (and specks) in the box
+    NothingOnIt { plane: Plane, left: usize },
+}
+
+pub fn remove_table(pixels: &Pixels, seed: u64) -> TableOutcome {
+    let points = &pixels.points;
+    if points.len() < 3 {
+        return TableOutcome::NoTable;
+    }
+    let mut depths: Vec<f64> = points.iter().map(|p| p.z).collect();
+    let median = *depths
+        .select_nth_unstable_by(points.len() / 2, f64::total_cmp)
+        .1;
+    let tolerance = TABLE_TOLERANCE * median;
+    let Some(PlaneFit {
+        plane,
+        inliers,
+        inlier_count,
+    }) = fit_plane(points, tolerance, seed)
+    else {
+        return TableOutcome::NoTable;
+    };
+    if (inlier_count as f64) < MIN_TABLE_SHARE * points.len() as f64 {
+        return TableOutcome::NoTable;
+    }
+    // the normal towards the camera (the origin of the optical frame)
+    let plane = if plane.signed_distance(DVec3::ZERO) < 0.0 {
+        Plane {
+            normal: (-plane.normal()).to_array(),
+            offset: -plane.offset,
+        }
+    } else {
+        plane
+    };
+    let above: Vec<bool> = points
+        .iter()
+        .zip(&inliers)
+        .map(|(&p, &on)| !on && plane.signed_distance(p) > 0.0)
+        .collect();
+    let enough = MIN_OBJECT_POINTS.max((MIN_OBJECT_SHARE * points.len() as f64) as usize);
+    // a table has the object on the camera's side; a plane with more of the rest behind
+    // it is a face of the object itself (a box's top seen from above)
+    let (n_above, n_off) = (
+        above.iter().filter(|&&a| a).count(),
+        inliers.iter().filter(|&&on| !on).count(),
+    );
+    let behind = n_off - n_above;
+    if behind >= enough && behind > n_above {
+        return TableOutcome::NoTable;
+    }
+    let object = largest_region(pixels, &above);
+    if object.len() < enough {
+        return TableOutcome::NothingOnIt {
+            plane,
+            left: object.len(),
+        };
+    }
+    TableOutcome::Removed {
+        plane,
+        table_points: inlier_count,
+        object,
+    }
+}
+
+/// The points of the largest 8-connected region of kept pixels, neighbours joined where
+/// their depths differ by less than [`DEPTH_JUMP`].
+fn largest_region(pixels: &Pixels, keep: &[bool]) -> Vec<DVec3> {
+    let (u0, v0) = pixels
+        .pixels
+        .iter()
+        .fold((u32::MAX, u32::MAX), |(a, b), &(u, v)| (a.min(u), b.min(v)));
+    let (u1, v1) = pixels
+        .pixels
+        .iter()
+        .fold((0, 0), |(a, b), &(u, v)| (a.max(u), b.max(v)));
+    let (w, h) = ((u1 - u0 + 1) as usize, (v1 - v0 + 1) as usize);
+    // the point at each pixel of the box, if kept
+    let mut at = vec![usize::MAX; w * h];
+    for (i, &(u, v)) in pixels.pixels.iter().enumerate() {
+        if keep[i] {
+            at[(v - v0) as usize * w + (u - u0) as usize] = i;
+        }
+    }
+    let mut label = vec![usize::MAX; w * h];
+    let mut best: Vec<usize> = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..w * h {
+        if at[start] == usize::MAX || label[start] != usize::MAX {
+            continue;
+        }
+        let mut region = Vec::new();
+        label[start] = start;
+        stack.push(start);
+        while let Some(cell) = stack.pop() {
+            let i = at[cell];
+            region.push(i);
+            let (x, y) = ((cell % w) as i64, (cell / w) as i64);
+            let z = pixels.points[i].z;
+            for (dx, dy) in [
+                (-1, -1),
+                (0, -1),
+                (1, -1),
+                (-1, 0),
+                (1, 0),
+                (-1, 1),
+                (0, 1),
+                (1, 1),
+            ] {
+                let (nx, ny) = (x + dx, y + dy);
+                if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                    continue;
+                }
+                let n = ny as usize * w + nx as usize;
+                if at[n] == usize::MAX || label[n] != usize::MAX {
+                    continue;
+                }
+                if (pixels.points[at[n]].z - z).abs() < DEPTH_JUMP * z {
+                    label[n] = start;
+                    stack.push(n);
+                }
+            }
+        }
+        if region.len() > best.len() {
+            best = region;
+        }
+    }
+    best.sort_unstable();
+    best.into_iter().map(|i| pixels.points[i]).collect()
+}

@@ -1,0 +1,220 @@
+//! The table taken away from a depth frame's box: the plane fit against known planes,
+//! and frames of objects on a table rendered by the project's camera.
+
+use glam::{DQuat, DVec3};
+use rand::Rng;
+use supertoroid::io::depth::{DepthOptions, PinholeIntrinsics, Roi, back_project_pixels};
+use supertoroid::model::{Plane, Pose, Shape, meridian_distance};
+use supertoroid::scene::plane::fit_plane;
+use supertoroid::scene::table::{TableOutcome, remove_table};
+use supertoroid::synth::{self, Camera, Intrinsics};
+
+mod common;
+
+#[test]
+fn the_plane_fit_finds_a_noisy_plane_among_outliers() {
+    let mut rng = synth::rng(3);
+    let truth = Plane::through(DVec3::new(0.0, 0.0, 0.8), DVec3::new(0.1, -0.6, -1.0));
+    let n = truth.normal();
+    let (e1, e2) = n.any_orthonormal_pair();
+    let mut points: Vec<DVec3> = (0..700)
+        .map(|_| {
+            DVec3::new(0.0, 0.0, 0.8)
+                + e1 * rng.random_range(-0.3..0.3)
+                + e2 * rng.random_range(-0.3..0.3)
+                + n * rng.random_range(-0.001..0.001)
+        })
+        .collect();
+    points.extend((0..300).map(|_| {
+        DVec3::new(
+            rng.random_range(-0.3..0.3),
+            rng.random_range(-0.3..0.3),
+            rng.random_range(0.5..1.1),
+        )
+    }));
+    let fit = fit_plane(&points, 0.003, 1).unwrap();
+    assert!(
+        fit.plane.normal().dot(n).abs() > (1.0f64).to_radians().cos(),
+        "{:?}",
+        fit.plane
+    );
+    assert!(
+        fit.inlier_count >= 700 && fit.inlier_count < 760,
+        "{}",
+        fit.inlier_count
+    );
+    assert!(fit_plane(&points[..2], 0.003, 1).is_none());
+}
+
+/// A ring lying on the table z = 0 (world), seen by a camera above and in front, the
+/// table composited under it; the frame, the camera and the object's pixel box.
+fn table_frame(shape: Shape, at: DVec3) -> (synth::DepthImage, Camera, Roi, Pose) {
+    let pose = Pose::new(
+        DQuat::from_rotation_z(0.4),
+        at + DVec3::new(0.0, 0.0, shape.a3),
+    );
+    let camera = Camera::look_at(
+        Intrinsics::REALSENSE_640X480,
+        DVec3::new(0.05, -0.35, 0.4),
+        pose.translation,
+        DVec3::Z,
+    );
+    let view = synth::render_view(&shape, &pose, &camera, 0.0001).unwrap();
+    let depth = synth::with_table(&view.depth, &camera, &Plane::through(DVec3::ZERO, DVec3::Z));
+    let (u0, v0, u1, v1) = view.pixels.iter().fold((u32::MAX, u32::MAX, 0, 0), |b, p| {
+        (b.0.min(p[0]), b.1.min(p[1]), b.2.max(p[0]), b.3.max(p[1]))
+    });
+    // a detector's box: the object's pixels and a margin of table
+    let margin = 15;
+    let roi = Roi {
+        x: u0 as i64 - margin,
+        y: v0 as i64 - margin,
+        width: u1 - u0 + 2 * margin as u32,
+        height: v1 - v0 + 2 * margin as u32,
+    };
+    (depth, camera, roi, pose)
+}
+
+fn options(camera: &Camera, roi: Roi) -> DepthOptions {
+    let k = camera.intrinsics;
+    DepthOptions {
+        intrinsics: PinholeIntrinsics {
+            fx: k.fx,
+            fy: k.fy,
+            cx: k.cx,
+            cy: k.cy,
+        },
+        depth_scale: 0.0001,
+        roi: Some(roi),
+        depth_range: None,
+    }
+}
+
+#[test]
+fn a_box_around_an_object_on_a_table_keeps_the_object_and_a_bare_box_keeps_nothing() {
+    let shape = Shape::new(0.02, 0.02, 0.012, 2.2, 0.8, 1.0);
+    let (depth, camera, roi, pose) = table_frame(shape, DVec3::ZERO);
+    let pixels = back_project_pixels(&depth, &options(&camera, roi), None).unwrap();
+    let TableOutcome::Removed {
+        plane,
+        object,
+        table_points,
+    } = remove_table(&pixels, 0)
+    else {
+        panic!("no table found");
+    };
+    assert!(table_points > pixels.points.len() / 5, "{table_points}");
+    // the plane is the table's, in the camera's frame, its normal towards the camera
+    let up = camera.pose.rotation.inverse() * DVec3::Z;
+    assert!(plane.normal().dot(up) > 0.999, "{plane:?}");
+    // every kept point lies on the object (its bottom millimetres went with the table)
+    let to_world = |p: DVec3| camera.pose.to_world(p);
+    let on_object = object
+        .iter()
+        .filter(|&&p| meridian_distance(&shape, pose.to_canonical(to_world(p))).distance < 0.002)
+        .count();
+    assert_eq!(on_object, object.len(), "{on_object} of {}", object.len());
+    assert!(object.len() > 500);
+    // the same box moved onto bare table
+    let bare = Roi {
+        x: roi.x + roi.width as i64 + 20,
+        ..roi
+    };
+    assert!(
+        bare.x + bare.width as i64 <= 640,
+        "the bare box must fit beside the object"
+    );
+    let (far_depth, far_camera, _, _) = table_frame(shape, DVec3::ZERO);
+    let pixels = back_project_pixels(&far_depth, &options(&far_camera, bare), None).unwrap();
+    assert!(
+        matches!(remove_table(&pixels, 0), TableOutcome::NothingOnIt { .. }),
+        "a bare box must hold nothing"
+    );
+}
+
+#[test]
+fn the_depth_route_with_only_a_box_fits_the_object_and_refuses_a_bare_table() {
+    use base64::Engine;
+    use serde_json::{Value, json};
+    let server = common::Server::start(supertoroid::service::ServiceConfig {
+        backend: supertoroid::eval::Backend::Cpu,
+        ..Default::default()
+    });
+    let shape = Shape::new(0.02, 0.02, 0.012, 2.2, 0.8, 1.0);
+    let (depth, camera, roi, pose) = table_frame(shape, DVec3::ZERO);
+    let png = base64::engine::general_purpose::STANDARD
+        .encode(supertoroid::io::depth::encode_depth_png(&depth));
+    let k = camera.intrinsics;
+    let body = |roi: Roi| {
+        json!({
+            "depth_png": png, "depth_scale": 0.0001,
+            "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
+            "roi": {"x": roi.x, "y": roi.y, "width": roi.width, "height": roi.height},
+            "options": {"seed": 1, "grasps": {"gripper": {"max_opening": 0.08, "finger_depth": 0.045, "finger_width": 0.02}}}
+        })
+    };
+    let c = common::client();
+    let r = c
+        .post(server.url("/v1/fit/depth"))
+        .json(&body(roi))
+        .send()
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 200);
+    let fit: Value = r.json().unwrap();
+    let object: supertoroid::model::FittedObject = serde_json::from_value(fit.clone()).unwrap();
+    let (fitted, in_camera) = object.validated().unwrap();
+    let in_world = Pose::new(
+        camera.pose.rotation * in_camera.rotation,
+        camera.pose.to_world(in_camera.translation),
+    );
+    let errors = supertoroid::fit::ground_truth::compare((&shape, &pose), (&fitted, &in_world));
+    assert!(errors.success(), "{errors:?}: {}", fit["shape"]);
+    // the table comes back, and the grasps keep the hand above it
+    let table: Plane = serde_json::from_value(fit["table"].clone()).unwrap();
+    assert!(
+        table
+            .normal()
+            .dot(camera.pose.rotation.inverse() * DVec3::Z)
+            > 0.999
+    );
+    assert!(!fit["grasps"]["grasps"].as_array().unwrap().is_empty());
+    assert!(fit["grasps"]["rejected"]["plane"].as_u64().unwrap() > 0);
+    // a box of bare table
+    let bare = Roi {
+        x: roi.x + roi.width as i64 + 20,
+        ..roi
+    };
+    let r = c
+        .post(server.url("/v1/fit/depth"))
+        .json(&body(bare))
+        .send()
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 422);
+    let err: Value = r.json().unwrap();
+    assert_eq!(err["error"]["code"], "no_object_found", "{err}");
+}
+
+#[test]
+fn a_box_seen_from_above_filling_the_box_keeps_its_top() {
+    // no table in the box: the top face is a plane with the rest of the box behind it
+    let shape = Shape::new(0.05, 0.04, 0.03, 0.0, 0.1, 0.1);
+    let pose = Pose::new(DQuat::from_rotation_z(0.3), DVec3::new(0.0, 0.0, 0.03));
+    let camera = Camera::look_at(
+        Intrinsics::REALSENSE_640X480,
+        DVec3::new(0.0, -0.12, 0.45),
+        pose.translation,
+        DVec3::Z,
+    );
+    let view = synth::render_view(&shape, &pose, &camera, 0.0001).unwrap();
+    let (u0, v0, u1, v1) = view.pixels.iter().fold((u32::MAX, u32::MAX, 0, 0), |b, p| {
+        (b.0.min(p[0]), b.1.min(p[1]), b.2.max(p[0]), b.3.max(p[1]))
+    });
+    let roi = Roi {
+        x: u0 as i64,
+        y: v0 as i64,
+        width: u1 - u0 + 1,
+        height: v1 - v0 + 1,
+    };
+    let pixels = back_project_pixels(&view.depth, &options(&camera, roi), None).unwrap();
+    assert!(matches!(remove_table(&pixels, 0), TableOutcome::NoTable));
+}
