@@ -13,14 +13,18 @@ use axum::body::Body;
 use axum::extract::State;
 use axum::http::{HeaderMap, StatusCode};
 use glam::{DQuat, DVec3};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use utoipa::ToSchema;
 
 type Shared = State<Arc<AppState>>;
 
-/// The most surface points one request may ask for.
+/// The most surface points one request may ask for on a grid or at parameters.
 pub const MAX_SURFACE_POINTS: usize = 1_000_000;
+/// The most points one request may ask the nearest surface points of (each takes tens
+/// of microseconds: a grid search and Gauss-Newton steps).
+pub const MAX_NEAREST_POINTS: usize = 20_000;
 
 /// Exactly one of `grid`, `parameters`, `points`.
 #[derive(Deserialize, ToSchema)]
@@ -146,8 +150,25 @@ pub async fn surface(
         .object
         .validated()
         .map_err(invalid("invalid_object"))?;
+    // thousands of points take milliseconds to seconds: off the async workers
+    let points = tokio::task::spawn_blocking(move || surface_points(&request, &shape, &pose))
+        .await
+        .map_err(|e| {
+            ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", e.to_string())
+        })??;
+    Ok(Json(SurfaceResponse {
+        request_id: id.0,
+        points,
+    }))
+}
+
+fn surface_points(
+    request: &SurfaceRequest,
+    shape: &crate::model::Shape,
+    pose: &crate::model::Pose,
+) -> Result<Vec<SurfacePoint>, ApiError> {
     let bad_query = invalid("invalid_query");
-    let points = match (&request.grid, &request.parameters, &request.points) {
+    match (&request.grid, &request.parameters, &request.points) {
         (Some([n_eta, n_omega]), None, None) => {
             let count = n_eta.saturating_mul(*n_omega);
             if count == 0 || count > MAX_SURFACE_POINTS {
@@ -155,41 +176,35 @@ pub async fn surface(
                     "grid must have between 1 and {MAX_SURFACE_POINTS} points, got {n_eta} x {n_omega}"
                 )));
             }
-            surface::grid(&shape, &pose, *n_eta, *n_omega)
+            Ok(surface::grid(shape, pose, *n_eta, *n_omega))
         }
         (None, Some(parameters), None) => {
-            too_many(parameters.len())?;
+            too_many(parameters.len(), MAX_SURFACE_POINTS)?;
             parameters
                 .iter()
-                .map(|[eta, omega]| surface::at_parameters(&shape, &pose, *eta, *omega))
+                .map(|[eta, omega]| surface::at_parameters(shape, pose, *eta, *omega))
                 .collect::<Result<_, _>>()
-                .map_err(bad_query)?
+                .map_err(bad_query)
         }
         (None, None, Some(points)) => {
-            too_many(points.len())?;
+            too_many(points.len(), MAX_NEAREST_POINTS)?;
             points
-                .iter()
-                .map(|p| surface::nearest(&shape, &pose, DVec3::from_array(*p)))
+                .par_iter()
+                .map(|p| surface::nearest(shape, pose, DVec3::from_array(*p)))
                 .collect::<Result<_, _>>()
-                .map_err(bad_query)?
+                .map_err(bad_query)
         }
-        _ => {
-            return Err(bad_query(
-                "give exactly one of grid, parameters and points".into(),
-            ));
-        }
-    };
-    Ok(Json(SurfaceResponse {
-        request_id: id.0,
-        points,
-    }))
+        _ => Err(bad_query(
+            "give exactly one of grid, parameters and points".into(),
+        )),
+    }
 }
 
-fn too_many(n: usize) -> Result<(), ApiError> {
-    if n > MAX_SURFACE_POINTS {
+fn too_many(n: usize, limit: usize) -> Result<(), ApiError> {
+    if n > limit {
         return Err(ApiError::unprocessable(
             "invalid_query",
-            format!("at most {MAX_SURFACE_POINTS} points per request, got {n}"),
+            format!("at most {limit} points per request, got {n}"),
         ));
     }
     Ok(())
@@ -230,9 +245,10 @@ pub async fn grasps(
         .viewpoint
         .and_then(|v| v.position)
         .map(DVec3::from_array);
-    let grasps = request
-        .options
-        .plan(shape, pose, camera)
+    let options = request.options;
+    let grasps = tokio::task::spawn_blocking(move || options.plan(shape, pose, camera))
+        .await
+        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", e.to_string()))?
         .map_err(invalid("invalid_grasp_options"))?;
     Ok(Json(GraspsResponse {
         request_id: id.0,
