@@ -152,13 +152,6 @@ impl FrameBox {
         local.cmpge(self.lo).all() && local.cmple(self.hi).all()
     }
 
-    pub fn grown(&self, by: f64) -> Self {
-        Self {
-            lo: self.lo - DVec3::splat(by),
-            hi: self.hi + DVec3::splat(by),
-        }
-    }
-
     pub fn corners(&self) -> [DVec3; 8] {
         std::array::from_fn(|i| {
             DVec3::new(
