@@ -20,12 +20,9 @@ pub fn visual(shape: &Shape) -> Mesh {
     tessellate(shape, &Pose::IDENTITY, VISUAL_GRID.0, VISUAL_GRID.1)
 }
 
-/// Point sets whose convex hulls together cover the solid: the whole surface for a shape
-/// without a hole, arcs of the ring otherwise.
-pub fn collision_pieces(shape: &Shape) -> Vec<Vec<DVec3>> {
-    if !shape.has_hole() {
-        return vec![visual(shape).vertices];
-    }
+/// A ring's collision pieces: point sets of [`RING_PIECES`] arcs whose convex hulls
+/// together cover the solid without filling its hole.
+pub fn ring_pieces(shape: &Shape) -> Vec<Vec<DVec3>> {
     let (n_eta, n_omega) = PIECE_GRID;
     (0..RING_PIECES)
         .map(|k| {

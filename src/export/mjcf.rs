@@ -1,7 +1,7 @@
 //! The MJCF document: one free body per object (visual mesh without contacts, the
 //! collision pieces with them, inertia from the solid), the table as a plane.
 
-use super::{SceneExport, inertial, object_name};
+use super::{ObjectEntry, SceneExport, object_name};
 use glam::{DQuat, DVec3};
 use std::fmt::Write;
 
@@ -13,7 +13,7 @@ fn quat(q: DQuat) -> String {
     format!("{:.9} {:.9} {:.9} {:.9}", q.w, q.x, q.y, q.z)
 }
 
-pub fn document(scene: &SceneExport, pieces: &[usize]) -> String {
+pub fn document(scene: &SceneExport, entries: &[ObjectEntry]) -> String {
     let mut x = String::new();
     let _ = writeln!(x, "<mujoco model=\"supertoroid_scene\">");
     let _ = writeln!(x, "  <compiler angle=\"radian\" meshdir=\".\"/>");
@@ -23,7 +23,8 @@ pub fn document(scene: &SceneExport, pieces: &[usize]) -> String {
         v3(scene.gravity())
     );
     let _ = writeln!(x, "  <asset>");
-    for (i, &n) in pieces.iter().enumerate() {
+    for (i, entry) in entries.iter().enumerate() {
+        let n = entry.pieces;
         let name = object_name(i);
         let _ = writeln!(
             x,
@@ -48,10 +49,10 @@ pub fn document(scene: &SceneExport, pieces: &[usize]) -> String {
             quat(q)
         );
     }
-    for (i, (object, &n)) in scene.objects.iter().zip(pieces).enumerate() {
+    for (i, (object, entry)) in scene.objects.iter().zip(entries).enumerate() {
+        let n = entry.pieces;
         let name = object_name(i);
-        let inertia = inertial(&object.shape, scene.density);
-        let m = inertia.inertia;
+        let m = entry.inertia;
         let _ = writeln!(
             x,
             "    <body name=\"{name}\" pos=\"{}\" quat=\"{}\">",
@@ -62,8 +63,8 @@ pub fn document(scene: &SceneExport, pieces: &[usize]) -> String {
         let _ = writeln!(
             x,
             "      <inertial pos=\"{}\" mass=\"{:.9}\" fullinertia=\"{:.9e} {:.9e} {:.9e} {:.9e} {:.9e} {:.9e}\"/>",
-            v3(inertia.com),
-            inertia.mass,
+            v3(entry.com),
+            entry.mass,
             m.x_axis.x,
             m.y_axis.y,
             m.z_axis.z,

@@ -93,20 +93,13 @@ impl SceneExport {
     }
 }
 
-/// The inertial properties of one object in its body frame.
-pub(crate) struct Inertial {
+/// What the scene documents say of one object: its collision pieces and its inertial
+/// properties in its body frame.
+pub(crate) struct ObjectEntry {
+    pub pieces: usize,
     pub mass: f64,
     pub com: DVec3,
     pub inertia: DMat3,
-}
-
-pub(crate) fn inertial(shape: &Shape, density: f64) -> Inertial {
-    let (volume, com, inertia) = meshes::mass_properties(&meshes::visual(shape));
-    Inertial {
-        mass: volume * density,
-        com,
-        inertia: inertia * density,
-    }
 }
 
 pub(crate) fn object_name(i: usize) -> String {
@@ -129,33 +122,44 @@ pub fn write(scene: &SceneExport, dir: &Path) -> Result<Vec<PathBuf>, String> {
         written.push(path);
         Ok::<_, String>(())
     };
-    let mut pieces = Vec::new();
+    let mut entries = Vec::new();
     for (i, object) in scene.objects.iter().enumerate() {
         let name = object_name(i);
         let visual = meshes::visual(&object.shape);
         file(&format!("{name}_visual.obj"), &|out| {
             meshes::write_obj(&mut WriteRef(out), &visual)
         })?;
-        let object_pieces = meshes::collision_pieces(&object.shape);
-        for (k, piece) in object_pieces.iter().enumerate() {
-            file(&format!("{name}_piece_{k:02}.stl"), &|out| {
-                if object.shape.has_hole() {
+        let pieces = if object.shape.has_hole() {
+            let arcs = meshes::ring_pieces(&object.shape);
+            for (k, piece) in arcs.iter().enumerate() {
+                file(&format!("{name}_piece_{k:02}.stl"), &|out| {
                     meshes::write_stl_points(&mut WriteRef(out), piece, meshes::PIECE_GRID.0)
-                } else {
-                    let triangles: Vec<[DVec3; 3]> = visual
-                        .triangles
-                        .iter()
-                        .map(|t| t.map(|v| visual.vertices[v as usize]))
-                        .collect();
-                    meshes::write_stl(&mut WriteRef(out), &triangles)
-                }
+                })?;
+            }
+            arcs.len()
+        } else {
+            // without a hole the surface is its own (near-)convex piece
+            let triangles: Vec<[DVec3; 3]> = visual
+                .triangles
+                .iter()
+                .map(|t| t.map(|v| visual.vertices[v as usize]))
+                .collect();
+            file(&format!("{name}_piece_00.stl"), &|out| {
+                meshes::write_stl(&mut WriteRef(out), &triangles)
             })?;
-        }
-        pieces.push(object_pieces.len());
+            1
+        };
+        let (volume, com, inertia) = meshes::mass_properties(&visual);
+        entries.push(ObjectEntry {
+            pieces,
+            mass: volume * scene.density,
+            com,
+            inertia: inertia * scene.density,
+        });
     }
-    let mjcf = mjcf::document(scene, &pieces);
+    let mjcf = mjcf::document(scene, &entries);
     file("scene.xml", &|out| out.write_all(mjcf.as_bytes()))?;
-    let urdf = urdf::document(scene, &pieces);
+    let urdf = urdf::document(scene, &entries);
     file("scene.urdf", &|out| out.write_all(urdf.as_bytes()))?;
     Ok(written)
 }

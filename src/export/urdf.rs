@@ -1,7 +1,7 @@
 //! The URDF document: a `world` link, the table as a thin box, each object a link fixed
 //! to `world` at its pose with its visual mesh, its collision pieces and its inertia.
 
-use super::{SceneExport, inertial, object_name};
+use super::{ObjectEntry, SceneExport, object_name};
 use glam::{DQuat, DVec3, EulerRot};
 use std::fmt::Write;
 
@@ -17,7 +17,7 @@ fn origin(t: DVec3, q: DQuat) -> String {
     )
 }
 
-pub fn document(scene: &SceneExport, pieces: &[usize]) -> String {
+pub fn document(scene: &SceneExport, entries: &[ObjectEntry]) -> String {
     let mut x = String::new();
     let _ = writeln!(x, "<?xml version=\"1.0\"?>");
     let _ = writeln!(x, "<robot name=\"supertoroid_scene\">");
@@ -36,14 +36,14 @@ pub fn document(scene: &SceneExport, pieces: &[usize]) -> String {
         let _ = writeln!(x, "    {}", origin(point, q));
         let _ = writeln!(x, "  </joint>");
     }
-    for (i, (object, &n)) in scene.objects.iter().zip(pieces).enumerate() {
+    for (i, (object, entry)) in scene.objects.iter().zip(entries).enumerate() {
+        let n = entry.pieces;
         let name = object_name(i);
-        let inertia = inertial(&object.shape, scene.density);
-        let m = inertia.inertia;
+        let m = entry.inertia;
         let _ = writeln!(x, "  <link name=\"{name}\">");
         let _ = writeln!(x, "    <inertial>");
-        let _ = writeln!(x, "      {}", origin(inertia.com, DQuat::IDENTITY));
-        let _ = writeln!(x, "      <mass value=\"{:.9}\"/>", inertia.mass);
+        let _ = writeln!(x, "      {}", origin(entry.com, DQuat::IDENTITY));
+        let _ = writeln!(x, "      <mass value=\"{:.9}\"/>", entry.mass);
         let _ = writeln!(
             x,
             "      <inertia ixx=\"{:.9e}\" ixy=\"{:.9e}\" ixz=\"{:.9e}\" iyy=\"{:.9e}\" iyz=\"{:.9e}\" izz=\"{:.9e}\"/>",

@@ -151,11 +151,7 @@ pub async fn surface(
         .validated()
         .map_err(invalid("invalid_object"))?;
     // thousands of points take milliseconds to seconds: off the async workers
-    let points = tokio::task::spawn_blocking(move || surface_points(&request, &shape, &pose))
-        .await
-        .map_err(|e| {
-            ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", e.to_string())
-        })??;
+    let points = off_the_workers(move || surface_points(&request, &shape, &pose)).await??;
     Ok(Json(SurfaceResponse {
         request_id: id.0,
         points,
@@ -198,6 +194,16 @@ fn surface_points(
             "give exactly one of grid, parameters and points".into(),
         )),
     }
+}
+
+/// Runs CPU work of milliseconds to seconds on tokio's blocking pool, off the async
+/// workers that serve every other request.
+async fn off_the_workers<T: Send + 'static>(
+    work: impl FnOnce() -> T + Send + 'static,
+) -> Result<T, ApiError> {
+    tokio::task::spawn_blocking(work)
+        .await
+        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", e.to_string()))
 }
 
 fn too_many(n: usize, limit: usize) -> Result<(), ApiError> {
@@ -246,9 +252,8 @@ pub async fn grasps(
         .and_then(|v| v.position)
         .map(DVec3::from_array);
     let options = request.options;
-    let grasps = tokio::task::spawn_blocking(move || options.plan(shape, pose, camera))
-        .await
-        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", e.to_string()))?
+    let grasps = off_the_workers(move || options.plan(shape, pose, camera))
+        .await?
         .map_err(invalid("invalid_grasp_options"))?;
     Ok(Json(GraspsResponse {
         request_id: id.0,
