@@ -3,6 +3,7 @@
 //! ([`scaling`]), and grasps planned on fits checked on the truth ([`grasps`]). Every sub-bench returns a serialisable report and writes it as JSON and
 //! CSV (for machines) and markdown (for people), with the machine and git revision.
 
+pub mod ablation;
 pub mod grasps;
 pub mod paper;
 pub mod plot;

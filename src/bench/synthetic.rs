@@ -50,6 +50,8 @@ pub struct Case {
     pub coverage_warning: bool,
     /// whether it carried the warning of a fit off a precise cloud (`fit::PRECISE_MISFIT_WARNING`)
     pub misfit_warning: bool,
+    /// whether it carried any warning at all
+    pub warned: bool,
     /// the share of an efficient estimator's fits of this cloud within the tolerances
     /// (`fit::attainable`: the Cramér-Rao bound of its inliers); NaN where it has none
     pub attainable: f64,
@@ -92,7 +94,7 @@ impl Presentation {
 
 /// A case's cloud as `presentation` gives it to the fit, with its viewpoint option and
 /// the pose that maps the fit back to the suite's frame.
-fn presented(
+pub(crate) fn presented(
     case: &crate::fit::ground_truth::Case,
     presentation: Presentation,
 ) -> (Vec<glam::DVec3>, Viewpoint, Pose) {
@@ -178,6 +180,10 @@ pub struct SyntheticReport {
     /// success of the fits without a warning, with the noise warning, with the
     /// unseen-surface warning, the off-a-precise-cloud warning (a fit can carry several)
     pub by_warning: Vec<Band>,
+    /// how far the warnings can be trusted: (warned, all) of the wrong fits and of the
+    /// right ones
+    pub wrong_warned: (usize, usize),
+    pub right_warned: (usize, usize),
     /// pictures of failed cases (paths relative to the report)
     pub pictures: Vec<String>,
 }
@@ -337,6 +343,7 @@ pub fn run(
                 .warnings
                 .iter()
                 .any(|w| w.starts_with("off a precise")),
+            warned: !report.warnings.is_empty(),
             attainable: attainable::suite_case(&case, case_seed).unwrap_or(f64::NAN),
             visible_coverage: report.quality.visible_coverage.unwrap_or(f64::NAN),
             viewpoint_found: report.viewpoint.source == ViewpointSource::FrameOrigin,
@@ -411,9 +418,17 @@ pub fn run(
         categories,
         by_noise_ratio,
         by_warning,
+        wrong_warned: warned_among(&out, false),
+        right_warned: warned_among(&out, true),
         cases: out,
         pictures,
     })
+}
+
+/// (warned, all) of the cases whose success is `success`.
+fn warned_among(cases: &[Case], success: bool) -> (usize, usize) {
+    let of: Vec<&Case> = cases.iter().filter(|c| c.success == success).collect();
+    (of.iter().filter(|c| c.warned).count(), of.len())
 }
 
 /// The success tables by noise ratio band and by warning, full clouds then partial.
@@ -544,6 +559,16 @@ impl Report for SyntheticReport {
             100.0 * self.partial_with_outliers_rate,
             100.0 * self.partial_with_outliers_interval[0],
             100.0 * self.partial_with_outliers_interval[1]
+        );
+        let share = |(k, n): (usize, usize)| 100.0 * k as f64 / n.max(1) as f64;
+        md += &format!(
+            "Warnings: {} of {} wrong fits carry one ({:.0}%), {} of {} right fits ({:.0}%).\n\n",
+            self.wrong_warned.0,
+            self.wrong_warned.1,
+            share(self.wrong_warned),
+            self.right_warned.0,
+            self.right_warned.1,
+            share(self.right_warned)
         );
         if let (Some(overall), Some(with_outliers)) = (
             self.from_truth_overall_rate,

@@ -120,6 +120,10 @@ pub struct BenchArgs {
     /// as `fit --retries` (synthetic: its single views have the camera's position)
     #[arg(long, global = true, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=crate::fit::MAX_UNSEEN_SURFACE_RETRIES))]
     pub retries: u64,
+    /// leave these optional stages of the fit out (paper, synthetic), comma-separated:
+    /// for ablations, each stage's gain against its time
+    #[arg(long, global = true, value_enum, value_delimiter = ',')]
+    pub skip: Vec<crate::fit::ablation::Stage>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -157,6 +161,20 @@ pub enum BenchCommand {
         /// (about 0.1 s more per noisy case)
         #[arg(long)]
         from_truth: bool,
+    },
+    /// The ground-truth suite's cases fitted with every optional stage of the fit and
+    /// without each in turn, interleaved: what each stage gains and costs.
+    Ablation {
+        #[arg(long, default_value_t = 180)]
+        cases: usize,
+        #[arg(long, value_delimiter = ',', default_values_t = [crate::bench::synthetic::DEFAULT_SEED])]
+        seed: Vec<u64>,
+        /// how the clouds reach the fit
+        #[arg(long, value_enum, default_value = "camera")]
+        presentation: crate::bench::synthetic::Presentation,
+        /// the stages to leave out one at a time (default: all)
+        #[arg(long, value_enum, value_delimiter = ',')]
+        stages: Vec<crate::fit::ablation::Stage>,
     },
     /// The ground-truth suite's cases fitted, the best grasp planned on each fit and
     /// checked on the true surface (contacts within 2 mm, antipodal there).
@@ -636,6 +654,7 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         method: args.method,
         thorough: args.thorough,
         unseen_surface_retries: args.retries,
+        skip: args.skip.clone(),
         ..Default::default()
     };
     let render = args
@@ -688,6 +707,17 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
                 render.as_ref(),
             )
             .map_err(Failure::input)?;
+            write(&|d| write_report(d, &r), r.markdown())
+        }
+        BenchCommand::Ablation {
+            cases,
+            seed,
+            presentation,
+            stages,
+        } => {
+            let r =
+                crate::bench::ablation::run(*cases, seed, *presentation, stages, backend, &options)
+                    .map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }
         BenchCommand::Grasps { cases, seed } => {

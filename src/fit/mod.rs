@@ -29,6 +29,7 @@
 //! point set of the evaluator, each start names its cloud's set), so one batched
 //! evaluation per solver iteration serves every cloud; [`fit`] is a batch of one.
 
+pub mod ablation;
 pub mod attainable;
 mod checks;
 pub mod coverage;
@@ -41,6 +42,7 @@ pub mod scatter;
 pub mod starts;
 pub mod viewpoint;
 
+use ablation::Stage;
 pub use checks::*;
 use inferred_view::{inferred, report_viewpoint, with_resolved};
 pub use report::{
@@ -197,10 +199,12 @@ pub struct FitOptions {
     pub thorough: bool,
     /// a fit the noise model refined is refined by it once more at the end, on up to this
     /// many of the cloud's points (all of them where the cloud has fewer), and its top
-    /// view read both ways again (see `polish_on_more_points` in this module); a fit the
-    /// retries left off a precise cloud is refined by least squares on as many
-    /// (`polish_precise_misfits`); 0 turns both off
+    /// view read both ways again (see `polish_on_more_points` in this module); 0 turns
+    /// it off
     pub polish_points: usize,
+    /// optional stages left out, for ablations ([`ablation`]); empty for every caller
+    /// but the benchmarks
+    pub skip: Vec<ablation::Stage>,
 }
 
 /// The noise (first-order Euclidean sigma over the smallest of a1, a2, a3) from which a
@@ -284,6 +288,7 @@ impl Default for FitOptions {
             noise_model: true,
             thorough: false,
             polish_points: POLISH_POINTS,
+            skip: Vec::new(),
         }
     }
 }
@@ -422,12 +427,10 @@ pub fn fit(
 /// hole, perhaps a ring seen edge-on), `retry_unseen_surfaces` (other seeds for a fit
 /// whose visible surface is bare, that stays off a precise cloud or its scatter, or whose
 /// noise the cloud does not show), `retry_lasting_misfits` (more seeds where those
-/// leave it so), `sweep_edge_on_axes` (hole axes all round the plane across the line
-/// of sight for a view still uncovered or rescued), `polish_precise_misfits` (further
-/// starts at small loss scales), `refit_precise_misfits_on_other_axes`,
-/// `rescue_barely_covered_closed_bodies`, `polish_on_more_points` (the noise model
-/// once more on all points) and `warn_off_scatter`. Each check's time is charged to the
-/// fits it looked at, whether it replaced them or not (`charge_wait`).
+/// leave it so), `polish_on_more_points` (the noise model once more on all points) and
+/// `warn_off_scatter`. Each check's time is charged to the
+/// fits it looked at, whether it replaced them or not (`charge_wait`), and listed in its
+/// `timing_ms.checks`; `bench ablation` measures what each gains and costs.
 ///
 /// Each cloud gets the fit [`fit`] gives it alone (bit for bit on the CPU evaluator);
 /// its `timing_ms` is its group's, since the clouds share every evaluation. The outer
@@ -451,12 +454,24 @@ pub fn fit_batch(
         })
         .collect();
     let mut results = fit_batch_once(evaluator, &with_resolved(clouds, &resolved))?;
+    let first_timing: Vec<Timing> = results
+        .iter()
+        .map(|r| r.as_ref().map(|r| r.timing_ms.clone()).unwrap_or_default())
+        .collect();
+    let mut ledger = CheckLedger::new(&results);
+    let skip = |stage| ablation::all_skip(clouds, stage);
     // a cloud all round its object is no view: the checks after see it as none
-    for i in inferred_view::settle_inferred_viewpoints(
-        evaluator,
-        &with_resolved(clouds, &resolved),
-        &mut results,
-    )? {
+    let all_round = if skip(Stage::SettleInferredView) {
+        Vec::new()
+    } else {
+        inferred_view::settle_inferred_viewpoints(
+            evaluator,
+            &with_resolved(clouds, &resolved),
+            &mut results,
+        )?
+    };
+    ledger.record(Stage::SettleInferredView, &results);
+    for i in all_round {
         let (options, used) = &mut resolved[i];
         options.viewpoint = Viewpoint::None;
         *used = ViewpointUsed {
@@ -471,24 +486,85 @@ pub fn fit_batch(
     }
     let clouds = with_resolved(clouds, &resolved);
     let clouds = clouds.as_slice();
-    refit_without_inconsistent_viewpoints(evaluator, clouds, &mut results)?;
-    retry_across_line_of_sight(evaluator, clouds, &mut results)?;
+    if !skip(Stage::InconsistentViewpoint) {
+        refit_without_inconsistent_viewpoints(evaluator, clouds, &mut results)?;
+        ledger.record(Stage::InconsistentViewpoint, &results);
+    }
+    if !skip(Stage::AcrossLineOfSight) {
+        retry_across_line_of_sight(evaluator, clouds, &mut results)?;
+        ledger.record(Stage::AcrossLineOfSight, &results);
+    }
     let scatters = Scatters::new(clouds);
-    let retried = retry_unseen_surfaces(evaluator, clouds, &scatters, &mut results)?;
-    retry_lasting_misfits(evaluator, clouds, &scatters, &retried, &mut results)?;
-    sweep_edge_on_axes(evaluator, clouds, &mut results)?;
-    polish_precise_misfits(evaluator, clouds, &scatters, &mut results)?;
-    refit_precise_misfits_on_other_axes(evaluator, clouds, &scatters, &mut results)?;
-    rescue_barely_covered_closed_bodies(evaluator, clouds, &mut results);
-    polish_on_more_points(evaluator, clouds, &mut results);
+    let retried = if skip(Stage::UnseenSurfaceRetries) {
+        Vec::new()
+    } else {
+        let retried = retry_unseen_surfaces(evaluator, clouds, &scatters, &mut results)?;
+        ledger.record(Stage::UnseenSurfaceRetries, &results);
+        retried
+    };
+    if !skip(Stage::LastingMisfitRetries) {
+        retry_lasting_misfits(evaluator, clouds, &scatters, &retried, &mut results)?;
+        ledger.record(Stage::LastingMisfitRetries, &results);
+    }
+    if !skip(Stage::PolishOnMorePoints) {
+        polish_on_more_points(evaluator, clouds, &mut results);
+        ledger.record(Stage::PolishOnMorePoints, &results);
+    }
     warn_off_scatter(clouds, &scatters, &mut results);
     scatters.charge(&mut results);
-    for (r, (_, used)) in results.iter_mut().zip(resolved) {
+    ledger.record_as("scatter", &results);
+    for ((r, (_, used)), (first, checks)) in results
+        .iter_mut()
+        .zip(resolved)
+        .zip(first_timing.into_iter().zip(ledger.checks))
+    {
         if let Ok(r) = r {
             report_viewpoint(used, r);
+            r.timing_ms = Timing {
+                checks,
+                total: r.timing_ms.total,
+                ..first
+            };
         }
     }
     Ok(results)
+}
+
+/// Each cloud's time in the checks of its finished fit, by check: what its total grew
+/// by while the check ran (a check charges its time to the fits it looked at).
+struct CheckLedger {
+    totals: Vec<f64>,
+    checks: Vec<std::collections::BTreeMap<String, f64>>,
+}
+
+impl CheckLedger {
+    fn new(results: &[Result<FitReport, FitError>]) -> Self {
+        Self {
+            totals: Self::totals(results),
+            checks: vec![Default::default(); results.len()],
+        }
+    }
+
+    fn totals(results: &[Result<FitReport, FitError>]) -> Vec<f64> {
+        results
+            .iter()
+            .map(|r| r.as_ref().map_or(0.0, |r| r.timing_ms.total))
+            .collect()
+    }
+
+    fn record(&mut self, stage: Stage, results: &[Result<FitReport, FitError>]) {
+        self.record_as(&ablation::name(stage), results);
+    }
+
+    fn record_as(&mut self, name: &str, results: &[Result<FitReport, FitError>]) {
+        let now = Self::totals(results);
+        for (i, (&after, before)) in now.iter().zip(&self.totals).enumerate() {
+            if after > *before {
+                *self.checks[i].entry(name.to_owned()).or_default() += after - before;
+            }
+        }
+        self.totals = now;
+    }
 }
 
 /// The start of the warning of a viewpoint the fit found contradicted by its points.
@@ -512,9 +588,6 @@ enum StartSet {
     Usual,
     /// only the hole axes across the line of sight ([`starts::across_line_of_sight`])
     AcrossLineOfSight,
-    /// only the hole axes all round the plane across the line of sight
-    /// ([`starts::edge_on_sweep`])
-    EdgeOnSweep,
 }
 
 /// [`fit_batch_once`] from the given starts: None for a cloud that has none of them.
@@ -600,6 +673,8 @@ struct Prepared<'a> {
     /// the cloud's own scatter ([`scatter::local_scatter`], normalised units), measured
     /// when first asked
     scatter: std::sync::OnceLock<Option<f64>>,
+    /// optional stages left out ([`FitOptions::skip`])
+    skip: Vec<Stage>,
 }
 
 fn prepare<'a>(
@@ -709,24 +784,6 @@ fn prepare<'a>(
                     across,
                     on_across,
                     axis,
-                    a4,
-                ));
-            }
-        }
-    }
-    if start_set == StartSet::EdgeOnSweep && o.known_axis.is_none() && !paper {
-        let viewpoint = o.viewpoint.position().map(|v| norm.point(v));
-        for axis in starts::edge_on_sweep(line.map(|(a, _)| a), viewpoint) {
-            // (a hint along the line of sight: the section's x axis faces the sensor)
-            let hint = viewpoint.map_or(DVec3::X, |v| -v);
-            let on_axis = starts::axis_point_for_direction(&axis_sample, &normals, axis)
-                .unwrap_or(DVec3::ZERO);
-            for a4 in [None, Some(1.3), Some(2.5)] {
-                across_starts.push(starts::start_on_axis_line(
-                    &axis_sample,
-                    axis,
-                    on_axis,
-                    hint,
                     a4,
                 ));
             }
@@ -851,7 +908,7 @@ fn prepare<'a>(
         stage2_free,
         starts: match start_set {
             StartSet::Usual => starts,
-            StartSet::AcrossLineOfSight | StartSet::EdgeOnSweep => across_starts,
+            StartSet::AcrossLineOfSight => across_starts,
         },
         bounds,
         opts1,
@@ -865,6 +922,7 @@ fn prepare<'a>(
         noise_model: !paper && o.noise_model,
         known_axis: o.known_axis.is_some(),
         scatter: std::sync::OnceLock::new(),
+        skip: o.skip.clone(),
     })
 }
 
@@ -902,7 +960,6 @@ fn fit_group(
         stage1_iterations.push(solutions.iter().map(|s| s.iterations).max().unwrap_or(0));
         finalists.push(stage1_finalists(&solutions, p));
     }
-    spin_about_axis(evaluator, group, &mut finalists, &opts1)?;
     let t1 = start.elapsed();
 
     // Stage 2: the finalists of every cloud, on its cloud's 1000-point sample.
@@ -941,6 +998,7 @@ fn fit_group(
         })
         .collect();
     let chosen = refine_robustly(evaluator, group, chosen, &opts2)?;
+    let noise_model_start = Instant::now();
     let chosen: Vec<(Solution, Option<ModelFit>, bool, bool)> = group
         .iter()
         .zip(chosen)
@@ -955,6 +1013,8 @@ fn fit_group(
             (s, model, uncovered_before, above_scatter)
         })
         .collect();
+    // (the group's clouds share the time, as they share every evaluation)
+    let noise_model_ms = noise_model_start.elapsed().as_secs_f64() * 1e3;
     let mut reports: Vec<FitReport> = group
         .iter()
         .zip(&chosen)
@@ -981,7 +1041,9 @@ fn fit_group(
     let timing = Timing {
         stage1: t1.as_secs_f64() * 1e3,
         stage2: (t_total - t1).as_secs_f64() * 1e3,
+        noise_model: noise_model_ms,
         total: t_total.as_secs_f64() * 1e3,
+        ..Default::default()
     };
     for r in &mut reports {
         r.timing_ms = timing.clone();
@@ -993,104 +1055,6 @@ fn fit_group(
 /// close on one another converge to one solution: at 1e-2 apart the paper clouds' starts
 /// ended within 1e-4 of each other.
 const MERGE_TOLERANCE: f64 = 1e-2;
-
-/// Turns about the hole axis at which [`spin_about_axis`] starts stage 1's best fit
-/// again (degrees; a1 and a2 kept, so 90 degrees is the top view with a1 and a2 swapped,
-/// 45 and 135 the readings of [`starts::turned_dual`]'s kind).
-const SPINS_DEGREES: [f64; 3] = [45.0, 90.0, 135.0];
-/// Solver iterations of each turned start (on the stage-1 sample). 8, 12 and 30 gained
-/// the same cases on the suite; 8 against 12 took the paper clouds' median fit from 9.3
-/// to 8.6 ms (six interleaved runs).
-const SPIN_ITERATIONS: usize = 8;
-/// A turned fit goes to stage 2 when its median distance on the stage-1 sample is below
-/// this fraction of the best fit's.
-const SPIN_MEDIAN_RATIO: f64 = 0.5;
-
-/// Least squares settles a lopsided top view (a1 far from a2, or eps2 far from 1) in the
-/// orientation about the hole axis its start had: on noise-free clouds of the suite
-/// (20135, a single view, and 20162, a full cloud) stage 1's best fit sat in a basin
-/// turned about the right axis, leaving 15% of the points off the surface, while the same
-/// fit turned 45, 90 or 135 degrees and solved again lay on every point. So stage 1's
-/// best fit of each cloud is turned by [`SPINS_DEGREES`] and solved a few iterations on
-/// the stage-1 sample (one batch for the group); a turned fit whose median distance is
-/// under [`SPIN_MEDIAN_RATIO`] of the best fit's (a noise-free cloud lies on the right
-/// basin's surface exactly; on a noisy one the median is the noise's, and the turn
-/// rarely halves it), and that does not overreach where the best fit did not, joins the
-/// finalists of stage 2 first. Measured on the suite (540 cases, seeds 10000, 20000,
-/// 30000): 510 -> 512 within tolerance (20135 and 20162 gained, none lost); the paper
-/// clouds' fits about 1-4 ms longer (interleaved medians on a slow day 12-13 -> 12-18 ms).
-fn spin_about_axis(
-    evaluator: &mut dyn Evaluator,
-    group: &[(usize, Prepared)],
-    finalists: &mut [Vec<Candidate>],
-    opts1: &SolverOptions,
-) -> Result<(), FitError> {
-    let mut starts = Vec::new();
-    let mut sets = Vec::new();
-    for (cloud, (_, p)) in group.iter().enumerate() {
-        if p.method != Method::Default || p.known_axis {
-            continue;
-        }
-        let c = finalists[cloud][0];
-        for degrees in SPINS_DEGREES {
-            starts.push(Candidate {
-                pose: Pose::new(
-                    c.pose.rotation * DQuat::from_rotation_z(degrees.to_radians()),
-                    c.pose.translation,
-                ),
-                ..c
-            });
-            sets.push(cloud);
-        }
-    }
-    if starts.is_empty() {
-        return Ok(());
-    }
-    let bounds = vec![group[0].1.bounds; starts.len()];
-    let options = SolverOptions {
-        max_iterations: SPIN_ITERATIONS,
-        ..*opts1
-    };
-    let solved = solve_on(evaluator, &starts, &sets, &bounds, &options)?;
-    // judged by the median distance, which outliers do not move: per turned cloud, its
-    // best fit and then its turned solutions, on the stage-1 sample
-    let turns = SPINS_DEGREES.len();
-    let mut judged = Vec::with_capacity(solved.len() + solved.len() / turns);
-    for (k, turned) in solved.chunks(turns).enumerate() {
-        judged.push(finalists[sets[k * turns]][0]);
-        judged.extend(turned.iter().map(|s| s.candidate));
-    }
-    let judged_sets: Vec<usize> = sets
-        .chunks(turns)
-        .flat_map(|c| std::iter::repeat_n(c[0], turns + 1))
-        .collect();
-    let residuals = evaluator.residuals_on(&judged, &judged_sets)?;
-    let mut offset = 0;
-    for (candidates, &cloud) in judged.chunks(turns + 1).zip(sets.iter().step_by(turns)) {
-        let p = &group[cloud].1;
-        let n = p.stage1_pts.len();
-        let medians: Vec<f64> = (0..=turns)
-            .map(|k| {
-                let start = offset + k * n;
-                let mut m: Vec<f64> = residuals[start..start + n]
-                    .iter()
-                    .map(|x| x.abs())
-                    .collect();
-                report::median(&mut m)
-            })
-            .collect();
-        offset += (turns + 1) * n;
-        let over = |c: &Candidate| p.overreaches(c, &p.stage1_pts);
-        if let Some(k) = (1..=turns)
-            .filter(|&k| !over(&candidates[k]) || over(&candidates[0]))
-            .min_by(|&a, &b| medians[a].total_cmp(&medians[b]))
-            && medians[k] < SPIN_MEDIAN_RATIO * medians[0]
-        {
-            finalists[cloud].insert(0, candidates[k]);
-        }
-    }
-    Ok(())
-}
 
 /// The most rounds of [`refine_robustly`], each at a smaller Cauchy scale.
 const ROBUST_ROUNDS: usize = 4;
@@ -1128,7 +1092,10 @@ fn refine_robustly(
     chosen: Vec<Solution>,
     opts2: &SolverOptions,
 ) -> Result<Vec<Solution>, FitError> {
-    if group.iter().all(|(_, p)| p.refine_scale.is_none()) {
+    if group
+        .iter()
+        .all(|(_, p)| p.refine_scale.is_none() || p.skip.contains(&Stage::RobustRefine))
+    {
         return Ok(chosen);
     }
     let candidates: Vec<Candidate> = chosen.iter().map(|s| s.candidate).collect();
@@ -1143,7 +1110,10 @@ fn refine_robustly(
             .map(|r| r.abs())
             .collect();
         offset += n;
-        let Some(k) = p.refine_scale else {
+        let Some(k) = p
+            .refine_scale
+            .filter(|_| !p.skip.contains(&Stage::RobustRefine))
+        else {
             refined.push(solution);
             continue;
         };
@@ -1295,7 +1265,7 @@ fn refine_both_readings(
     // plainly less likely ones, which go no further
     let (model_fit, model_sigma) = refined.map_or((*c, sigma), |r| (r.candidate, r.sigma));
     let mut other_reading_gap = None;
-    if let Some(dual_margin) = dual_margin
+    if let Some(dual_margin) = dual_margin.filter(|_| !p.skip.contains(&Stage::DualReading))
         && let Some(dual) = p.turned_dual(&model_fit)
         && let Some(first) = refine(&dual, model_sigma, DUAL_FIRST_ITERATIONS)
         && {
@@ -1717,11 +1687,7 @@ fn report(
         },
         quality,
         // set by the caller once every report of the group is done
-        timing_ms: Timing {
-            stage1: 0.0,
-            stage2: 0.0,
-            total: 0.0,
-        },
+        timing_ms: Timing::default(),
         iterations: Iterations {
             stage1: stage1_iterations,
             stage2: stage2_iterations,

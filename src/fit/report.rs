@@ -33,10 +33,17 @@ pub struct Quality {
     pub visible_coverage: Option<f64>,
 }
 
-#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+/// Where a fit's time went (milliseconds): the first fit's stages 1 and 2 (the noise
+/// model's refinement a part of stage 2), then each check of the finished fit that
+/// looked at it, by the name of its [`super::ablation::Stage`]; `total` is all of it.
+#[derive(Clone, Debug, Default, Serialize, utoipa::ToSchema)]
 pub struct Timing {
     pub stage1: f64,
     pub stage2: f64,
+    /// the noise model's share of stage 2
+    pub noise_model: f64,
+    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub checks: std::collections::BTreeMap<String, f64>,
     pub total: f64,
 }
 

@@ -210,31 +210,6 @@ pub fn across_line_of_sight(axis: DVec3, viewpoint: Option<DVec3>) -> Option<DVe
         .flatten()
 }
 
-/// Hole axes all round the plane across the line of sight from `viewpoint` to the cloud's
-/// centroid (the origin of the normalised frame), [`EDGE_ON_SWEEP`] of them evenly
-/// turned, starting from the one across `axis` (the normal lines' axis) where there is
-/// one: the axes of a ring seen edge-on, for views whose normal lines point nowhere near
-/// its hole axis. Empty without a viewpoint.
-pub fn edge_on_sweep(axis: Option<DVec3>, viewpoint: Option<DVec3>) -> Vec<DVec3> {
-    let Some(sight) = viewpoint.and_then(|v| (-v).try_normalize()) else {
-        return Vec::new();
-    };
-    let first = axis
-        .and_then(|a| a.cross(sight).try_normalize())
-        .unwrap_or_else(|| sight.any_orthonormal_vector());
-    let second = sight.cross(first);
-    (0..EDGE_ON_SWEEP)
-        .map(|k| {
-            let angle = std::f64::consts::PI * k as f64 / EDGE_ON_SWEEP as f64;
-            first * angle.cos() + second * angle.sin()
-        })
-        .collect()
-}
-
-/// How many axes [`edge_on_sweep`] turns through half a turn (30 degrees apart: stage 1
-/// turns an axis up to about 15 degrees into its basin).
-pub const EDGE_ON_SWEEP: usize = 6;
-
 /// See [`across_line_of_sight`]. The held-out view 60171 (noise-free, seen 75 degrees
 /// off its hole axis) had its normal lines' axis 44 degrees from the line of sight.
 pub const ALONG_SIGHT_DEGREES: f64 = 25.0;
@@ -326,38 +301,5 @@ mod tests {
             None
         );
         assert_eq!(across_line_of_sight(DVec3::X, None), None);
-    }
-
-    #[test]
-    fn the_edge_on_sweep_turns_all_round_the_plane_across_the_line_of_sight() {
-        let viewpoint = DVec3::new(1.0, -4.0, 2.0);
-        let sight = (-viewpoint).normalize();
-        // the normal lines' axis along the tube's tangent x: the first axis is across
-        // both it and the line of sight, the others turn on from there
-        let axes = edge_on_sweep(Some(DVec3::X), Some(viewpoint));
-        assert_eq!(axes.len(), EDGE_ON_SWEEP);
-        let first = DVec3::X.cross(sight).normalize();
-        assert!((axes[0].dot(first) - 1.0).abs() < 1e-12, "{:?}", axes[0]);
-        let step = std::f64::consts::PI / EDGE_ON_SWEEP as f64;
-        for (k, axis) in axes.iter().enumerate() {
-            assert!((axis.length() - 1.0).abs() < 1e-12);
-            assert!(axis.dot(sight).abs() < 1e-12, "axis {k} across the sight");
-            assert!((axis.angle_between(first) - k as f64 * step).abs() < 1e-9);
-        }
-        // every axis across the line of sight is within half a step of one of them
-        // (either sign)
-        for k in 0..36 {
-            let angle = k as f64 * 5f64.to_radians();
-            let other = sight.cross(first);
-            let any = first * angle.cos() + other * angle.sin();
-            let nearest = axes
-                .iter()
-                .map(|a| a.dot(any).abs().min(1.0).acos())
-                .fold(f64::INFINITY, f64::min);
-            assert!(nearest <= 0.5 * step + 1e-9, "{k}: {nearest}");
-        }
-        // without the normal lines' axis it still sweeps; without a viewpoint, nothing
-        assert_eq!(edge_on_sweep(None, Some(viewpoint)).len(), EDGE_ON_SWEEP);
-        assert!(edge_on_sweep(Some(DVec3::X), None).is_empty());
     }
 }

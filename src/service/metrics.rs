@@ -110,11 +110,15 @@ impl Metrics {
     }
 
     pub fn record_fit(&self, report: &crate::fit::FitReport) {
-        for (stage, ms) in [
-            ("stage1", report.timing_ms.stage1),
-            ("stage2", report.timing_ms.stage2),
-            ("total", report.timing_ms.total),
-        ] {
+        let t = &report.timing_ms;
+        let stages = [
+            ("stage1", t.stage1),
+            ("stage2", t.stage2),
+            ("noise_model", t.noise_model),
+            ("total", t.total),
+        ];
+        let checks = t.checks.iter().map(|(name, ms)| (name.as_str(), *ms));
+        for (stage, ms) in stages.into_iter().chain(checks) {
             self.stage_seconds
                 .get_or_create(&StageLabel {
                     stage: stage.into(),
