@@ -1809,3 +1809,42 @@ fn the_time_of_a_fit_is_accounted_for_by_stage() {
         skipped.timing_ms
     );
 }
+
+/// A fit whose time has reached its budget (`FitOptions::time_budget_ms`) skips the
+/// checks of the finished fit and names them; the first fit still comes back. A budget
+/// that is no positive number of milliseconds is refused.
+#[test]
+fn a_spent_time_budget_leaves_the_checks_out_and_says_so() {
+    let mut evaluator = CpuEvaluator::new();
+    let seed = 10_017;
+    let case = suite_case(10_000, seed);
+    let options = FitOptions {
+        time_budget_ms: Some(1e-3),
+        ..view_options(seed, &case, true)
+    };
+    let report = fit(&mut evaluator, &case.points, &options).unwrap();
+    let t = &report.timing_ms;
+    // (the off-scatter warning still measures the cloud's scatter: a warning, not a check)
+    assert!(t.checks.keys().all(|k| k == "scatter"), "{t:?}");
+    assert!(
+        t.over_budget.iter().any(|c| c == "polish-on-more-points")
+            && t.over_budget.iter().any(|c| c == "unseen-surface-retries"),
+        "{t:?}"
+    );
+    assert!(report.shape.a1 > 0.0);
+    for bad in [0.0, -5.0, f64::NAN] {
+        let refused = fit(
+            &mut evaluator,
+            &case.points,
+            &FitOptions {
+                time_budget_ms: Some(bad),
+                ..view_options(seed, &case, true)
+            },
+        );
+        assert!(
+            matches!(&refused, Err(FitError::InvalidOption(m)) if m.contains("time budget")),
+            "{bad}: {:?}",
+            refused.as_ref().err()
+        );
+    }
+}

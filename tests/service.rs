@@ -453,6 +453,13 @@ fn every_bad_input_class_gets_its_status_and_a_json_error() {
             "invalid_option",
         ),
         (
+            "negative time budget",
+            "/v1/fit",
+            json_case(json!({"points": planar_ok(), "options": {"time_budget_ms": -1.0}})),
+            422,
+            "invalid_option",
+        ),
+        (
             "zero axis",
             "/v1/fit",
             json_case(json!({"points": [[1,2,3]], "options": {"axis": [0,0,0]}})),

@@ -120,6 +120,9 @@ pub struct BenchArgs {
     /// as `fit --retries` (synthetic: its single views have the camera's position)
     #[arg(long, global = true, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=crate::fit::MAX_UNSEEN_SURFACE_RETRIES))]
     pub retries: u64,
+    /// the fits' time budget in milliseconds (paper, synthetic; see `fit --time-budget-ms`)
+    #[arg(long, global = true)]
+    pub time_budget_ms: Option<f64>,
     /// leave these optional stages of the fit out (paper, synthetic), comma-separated:
     /// for ablations, each stage's gain against its time
     #[arg(long, global = true, value_enum, value_delimiter = ',')]
@@ -309,6 +312,10 @@ pub struct FitArgs {
     /// it has fewer); 0 turns the polish off (faster by 20-150 ms on such clouds)
     #[arg(long, default_value_t = crate::fit::POLISH_POINTS)]
     pub polish_points: usize,
+    /// milliseconds after which the checks of the finished fit (retries, rescues, the
+    /// last polish) no longer start; the first fit always completes (default: no budget)
+    #[arg(long)]
+    pub time_budget_ms: Option<f64>,
     /// also write the fitted surface as a PLY mesh with normals
     #[arg(long)]
     pub mesh: Option<PathBuf>,
@@ -533,6 +540,7 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         noise_model: !args.no_noise_model,
         thorough: args.thorough,
         polish_points: args.polish_points,
+        time_budget_ms: args.time_budget_ms,
         ..Default::default()
     };
     let backend = args
@@ -655,6 +663,7 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         thorough: args.thorough,
         unseen_surface_retries: args.retries,
         skip: args.skip.clone(),
+        time_budget_ms: args.time_budget_ms,
         ..Default::default()
     };
     let render = args

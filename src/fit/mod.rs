@@ -205,6 +205,11 @@ pub struct FitOptions {
     /// optional stages left out, for ablations ([`ablation`]); empty for every caller
     /// but the benchmarks
     pub skip: Vec<ablation::Stage>,
+    /// the checks of the finished fit (retries, rescues, the last polish) start on a
+    /// cloud only while its time so far is under this many milliseconds; the first fit
+    /// always completes. A check left out for it is named in `timing_ms.over_budget`.
+    /// None (the default): no budget, and the fit does not depend on the machine's speed.
+    pub time_budget_ms: Option<f64>,
 }
 
 /// The noise (first-order Euclidean sigma over the smallest of a1, a2, a3) from which a
@@ -289,6 +294,7 @@ impl Default for FitOptions {
             thorough: false,
             polish_points: POLISH_POINTS,
             skip: Vec::new(),
+            time_budget_ms: None,
         }
     }
 }
@@ -460,15 +466,19 @@ pub fn fit_batch(
         .collect();
     let mut ledger = CheckLedger::new(&results);
     let skip = |stage| ablation::all_skip(clouds, stage);
+
     // a cloud all round its object is no view: the checks after see it as none
     let all_round = if skip(Stage::SettleInferredView) {
         Vec::new()
     } else {
-        inferred_view::settle_inferred_viewpoints(
+        let parked = ledger.park(Stage::SettleInferredView, clouds, &mut results);
+        let all_round = inferred_view::settle_inferred_viewpoints(
             evaluator,
             &with_resolved(clouds, &resolved),
             &mut results,
-        )?
+        )?;
+        CheckLedger::unpark(parked, &mut results);
+        all_round
     };
     ledger.record(Stage::SettleInferredView, &results);
     for i in all_round {
@@ -487,41 +497,54 @@ pub fn fit_batch(
     let clouds = with_resolved(clouds, &resolved);
     let clouds = clouds.as_slice();
     if !skip(Stage::InconsistentViewpoint) {
+        let parked = ledger.park(Stage::InconsistentViewpoint, clouds, &mut results);
         refit_without_inconsistent_viewpoints(evaluator, clouds, &mut results)?;
+        CheckLedger::unpark(parked, &mut results);
         ledger.record(Stage::InconsistentViewpoint, &results);
     }
     if !skip(Stage::AcrossLineOfSight) {
+        let parked = ledger.park(Stage::AcrossLineOfSight, clouds, &mut results);
         retry_across_line_of_sight(evaluator, clouds, &mut results)?;
+        CheckLedger::unpark(parked, &mut results);
         ledger.record(Stage::AcrossLineOfSight, &results);
     }
     let scatters = Scatters::new(clouds);
     let retried = if skip(Stage::UnseenSurfaceRetries) {
         Vec::new()
     } else {
+        let parked = ledger.park(Stage::UnseenSurfaceRetries, clouds, &mut results);
         let retried = retry_unseen_surfaces(evaluator, clouds, &scatters, &mut results)?;
+        CheckLedger::unpark(parked, &mut results);
         ledger.record(Stage::UnseenSurfaceRetries, &results);
         retried
     };
     if !skip(Stage::LastingMisfitRetries) {
+        let parked = ledger.park(Stage::LastingMisfitRetries, clouds, &mut results);
         retry_lasting_misfits(evaluator, clouds, &scatters, &retried, &mut results)?;
+        CheckLedger::unpark(parked, &mut results);
         ledger.record(Stage::LastingMisfitRetries, &results);
     }
     if !skip(Stage::PolishOnMorePoints) {
+        let parked = ledger.park(Stage::PolishOnMorePoints, clouds, &mut results);
         polish_on_more_points(evaluator, clouds, &mut results);
+        CheckLedger::unpark(parked, &mut results);
         ledger.record(Stage::PolishOnMorePoints, &results);
     }
     warn_off_scatter(clouds, &scatters, &mut results);
     scatters.charge(&mut results);
     ledger.record_as("scatter", &results);
-    for ((r, (_, used)), (first, checks)) in results
+    for ((r, (_, used)), (first, checks, over_budget)) in results
         .iter_mut()
         .zip(resolved)
         .zip(first_timing.into_iter().zip(ledger.checks))
+        .zip(ledger.over_budget)
+        .map(|((a, (first, checks)), over_budget)| (a, (first, checks, over_budget)))
     {
         if let Ok(r) = r {
             report_viewpoint(used, r);
             r.timing_ms = Timing {
                 checks,
+                over_budget,
                 total: r.timing_ms.total,
                 ..first
             };
@@ -535,13 +558,47 @@ pub fn fit_batch(
 struct CheckLedger {
     totals: Vec<f64>,
     checks: Vec<std::collections::BTreeMap<String, f64>>,
+    /// per cloud, the checks its time budget left out
+    over_budget: Vec<Vec<String>>,
 }
+
+/// The fits a check does not see (over their time budget), taken out of the results.
+struct Parked(Vec<(usize, Result<FitReport, FitError>)>);
 
 impl CheckLedger {
     fn new(results: &[Result<FitReport, FitError>]) -> Self {
         Self {
             totals: Self::totals(results),
             checks: vec![Default::default(); results.len()],
+            over_budget: vec![Vec::new(); results.len()],
+        }
+    }
+
+    /// Takes the fits over their time budget out of `results` before `stage` runs (a
+    /// check passes over errors), noting that it did not run for them.
+    fn park(
+        &mut self,
+        stage: Stage,
+        clouds: &[(&[DVec3], &FitOptions)],
+        results: &mut [Result<FitReport, FitError>],
+    ) -> Parked {
+        let mut parked = Vec::new();
+        for (i, ((_, o), r)) in clouds.iter().zip(results.iter_mut()).enumerate() {
+            if let (Ok(fit), Some(budget)) = (r.as_ref(), o.time_budget_ms)
+                && fit.timing_ms.total >= budget
+            {
+                // (a placeholder the check skips; `unpark` puts the fit back)
+                let fit = std::mem::replace(r, Err(FitError::InvalidOption(String::new())));
+                parked.push((i, fit));
+                self.over_budget[i].push(ablation::name(stage));
+            }
+        }
+        Parked(parked)
+    }
+
+    fn unpark(parked: Parked, results: &mut [Result<FitReport, FitError>]) {
+        for (i, fit) in parked.0 {
+            results[i] = fit;
         }
     }
 
@@ -682,6 +739,13 @@ fn prepare<'a>(
     o: &FitOptions,
     start_set: StartSet,
 ) -> Result<Prepared<'a>, FitError> {
+    if let Some(budget) = o.time_budget_ms
+        && !(budget.is_finite() && budget > 0.0)
+    {
+        return Err(FitError::InvalidOption(format!(
+            "the time budget must be a positive number of milliseconds, got {budget}"
+        )));
+    }
     if !(o.refine_scale.is_finite() && o.refine_scale >= 0.0) {
         return Err(FitError::InvalidOption(format!(
             "refine scale must be finite and >= 0, got {}",

@@ -44,6 +44,10 @@ pub struct Timing {
     pub noise_model: f64,
     #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub checks: std::collections::BTreeMap<String, f64>,
+    /// the checks that did not run because the fit's time had reached its budget
+    /// ([`super::FitOptions::time_budget_ms`])
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub over_budget: Vec<String>,
     pub total: f64,
 }
 

@@ -80,6 +80,10 @@ pub struct FitRequestOptions {
     /// the cloud's where it has fewer; 0 turns the polish off, saving 20-150 ms on such
     /// clouds)
     pub polish_points: Option<usize>,
+    /// milliseconds after which the checks of the finished fit (retries, rescues, the
+    /// last polish) no longer start (default: no budget; the first fit always completes;
+    /// the checks left out are named in `timing_ms.over_budget`)
+    pub time_budget_ms: Option<f64>,
     /// pipeline: default, or paper (the paper's procedure, a baseline)
     pub method: Option<crate::fit::Method>,
     /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
@@ -191,6 +195,7 @@ impl FitRequestOptions {
                 noise_model: self.noise_model.unwrap_or(defaults.noise_model),
                 thorough: self.thorough.unwrap_or(defaults.thorough),
                 polish_points: limit(self.polish_points, defaults.polish_points, "polish_points")?,
+                time_budget_ms: self.time_budget_ms,
                 ..defaults
             },
             backend: self.backend.unwrap_or(Backend::Auto),
