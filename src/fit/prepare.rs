@@ -1,0 +1,525 @@
+//! One cloud made ready for the fit: checked, normalised, sampled for both stages, with
+//! free-space points where a viewpoint is known, the stage-1 starts and both stages'
+//! solver settings; and what the later stages ask of it (point sets, size boxes, the
+//! noise model's limits, the other reading of a top view, collapsed starts).
+
+use super::*;
+
+/// `shape` with the known parameters (normalised sizes) put in.
+pub(super) fn holding_known(shape: Shape, known: &[Option<f64>; 6]) -> Shape {
+    let mut v = shape.to_array();
+    for (v, k) in v.iter_mut().zip(known) {
+        if let Some(k) = k {
+            *v = *k;
+        }
+    }
+    Shape::from_array(v)
+}
+
+/// Starting shape for a hole axis: sizes from the cloud's extent across and along it.
+pub(super) fn start_for_axis(points: &[DVec3], axis: DVec3, hint: DVec3, a4: f64) -> Candidate {
+    let rotation = starts::frame_with_z(axis, hint);
+    let inverse = rotation.inverse();
+    let local: Vec<DVec3> = points.iter().map(|p| inverse * *p).collect();
+    let mut radial: Vec<f64> = local.iter().map(|q| q.x.hypot(q.y)).collect();
+    let mut height: Vec<f64> = local.iter().map(|q| q.z.abs()).collect();
+    radial.sort_by(f64::total_cmp);
+    height.sort_by(f64::total_cmp);
+    let pick = |v: &[f64], f: f64| v[((v.len() - 1) as f64 * f) as usize];
+    let outer = pick(&radial, 0.95).max(1e-3);
+    let half_height = pick(&height, 0.95).max(1e-3 * outer);
+    let a = outer / (1.0 + a4);
+    Candidate {
+        shape: Shape::new(a, a, half_height, a4, 1.0, 1.0),
+        pose: Pose::new(rotation, DVec3::ZERO),
+    }
+}
+
+/// Which stage-1 starts a fit runs from.
+#[derive(Clone, Copy, PartialEq)]
+pub(super) enum StartSet {
+    /// [`prepare`]'s starts
+    Usual,
+    /// only the hole axes across the line of sight ([`starts::across_line_of_sight`])
+    AcrossLineOfSight,
+}
+
+/// One cloud, checked, normalised, sampled, with its stage-1 starts and solver settings.
+pub(super) struct Prepared<'a> {
+    pub(super) points: &'a [DVec3],
+    pub(super) method: Method,
+    pub(super) norm: Normalization,
+    pub(super) stage1_pts: Vec<DVec3>,
+    pub(super) stage2_pts: Vec<DVec3>,
+    /// free-space points of each stage (empty without a viewpoint)
+    pub(super) stage1_free: Vec<DVec3>,
+    pub(super) stage2_free: Vec<DVec3>,
+    /// stage 1's starts, of the [`StartSet`] asked for (the hole axes across the line of
+    /// sight: none unless a viewpoint is given and the normal lines' axis is across it)
+    pub(super) starts: Vec<Candidate>,
+    pub(super) bounds: Bounds,
+    pub(super) opts1: SolverOptions,
+    pub(super) opts2: SolverOptions,
+    /// a stage-1 runner-up in another basin within this cost ratio goes on to stage 2
+    pub(super) runner_up_ratio: Option<f64>,
+    pub(super) hole_preference: f64,
+    /// solutions that [`overreach`] beyond this rank below every one that does not
+    pub(super) max_overreach: Option<f64>,
+    /// Cauchy scale of the final refinement in robust residual scales, if it runs
+    pub(super) refine_scale: Option<f64>,
+    /// the viewpoint in the normalised frame, if given
+    pub(super) viewpoint: Option<DVec3>,
+    /// the known shape parameters (normalised sizes), held fixed
+    pub(super) known: [Option<f64>; 6],
+    /// run [`likelihood::refine`] on noisy fits
+    pub(super) noise_model: bool,
+    pub(super) known_axis: bool,
+    /// the cloud's own scatter ([`scatter::local_scatter`], normalised units), measured
+    /// when first asked
+    pub(super) scatter: std::sync::OnceLock<Option<f64>>,
+    /// optional stages left out ([`FitOptions::skip`])
+    pub(super) skip: Vec<Stage>,
+}
+
+pub(super) fn prepare<'a>(
+    points: &'a [DVec3],
+    o: &FitOptions,
+    start_set: StartSet,
+) -> Result<Prepared<'a>, FitError> {
+    if let Some(budget) = o.time_budget_ms
+        && !(budget.is_finite() && budget > 0.0)
+    {
+        return Err(FitError::InvalidOption(format!(
+            "the time budget must be a positive number of milliseconds, got {budget}"
+        )));
+    }
+    if !(o.refine_scale.is_finite() && o.refine_scale >= 0.0) {
+        return Err(FitError::InvalidOption(format!(
+            "refine scale must be finite and >= 0, got {}",
+            o.refine_scale
+        )));
+    }
+    if o.stage1_points < MIN_POINTS || o.stage2_points < MIN_POINTS {
+        return Err(FitError::InvalidOption(format!(
+            "points per stage must be at least {MIN_POINTS}"
+        )));
+    }
+    if o.polish_points != 0 && o.polish_points < MIN_POINTS {
+        return Err(FitError::InvalidOption(format!(
+            "polish points must be 0 (no polish) or at least {MIN_POINTS}"
+        )));
+    }
+    let (axes, _) = check_cloud(points)?;
+    let norm = Normalization::of(points);
+    let normalised = norm.points(points);
+    let mut rng = synth::rng(o.seed);
+    let stage1_pts = synth::subsample(&normalised, o.stage1_points, &mut rng);
+    let stage2_pts = synth::subsample(&normalised, o.stage2_points, &mut rng);
+    let (stage1_free, stage2_free) = match o.viewpoint.position() {
+        None => (Vec::new(), Vec::new()),
+        Some(v) if !v.is_finite() => {
+            return Err(FitError::InvalidOption(
+                "the viewpoint must be finite".into(),
+            ));
+        }
+        Some(v) => {
+            let v = norm.point(v);
+            (
+                free_space::in_front(&stage1_pts, v),
+                free_space::in_front(&stage2_pts, v),
+            )
+        }
+    };
+    let bounds = o.bounds();
+    let paper = o.method == Method::Paper;
+    let (a4_reward, hole_preference) = if paper {
+        (PAPER_A4_REWARD, PAPER_A4_REWARD)
+    } else {
+        (o.a4_reward, o.hole_preference)
+    };
+    let loss = if paper {
+        Loss::Squared
+    } else {
+        Loss::Huber(o.huber)
+    };
+
+    // Stage 1: batched multi-start.
+    let axes_to_try: Vec<DVec3> = match o.known_axis {
+        Some(a) if a.length() > 0.0 => vec![a.normalize()],
+        Some(_) => {
+            return Err(FitError::InvalidOption(
+                "known axis must not be zero".into(),
+            ));
+        }
+        None => vec![axes.z_axis, axes.y_axis, axes.x_axis],
+    };
+    let mut starts = Vec::new();
+    let mut across_starts = Vec::new();
+    // normal lines meet the hole axis (see `starts`): the start that handles partial views
+    let axis_sample = synth::subsample(&normalised, 400, &mut rng.clone());
+    let normals = starts::estimate_normals(&axis_sample, 12);
+    let line = match o.known_axis {
+        Some(d) => starts::axis_point_for_direction(&axis_sample, &normals, d.normalize())
+            .map(|c| (d.normalize(), c)),
+        None => starts::axis_from_normal_lines(&axis_sample, &normals),
+    };
+    if let Some((axis, on_axis)) = line.filter(|_| !paper) {
+        let hint = if axis.dot(axes.x_axis).abs() > 0.9 {
+            axes.y_axis
+        } else {
+            axes.x_axis
+        };
+        // the in-plane angle: a squarish section (eps2 < 1) turned 45 degrees looks like
+        // a diamond (eps2 > 1), a local minimum, so both turns start
+        let turned = DQuat::from_axis_angle(axis, std::f64::consts::FRAC_PI_4) * hint;
+        for hint in [hint, turned] {
+            for a4 in [None, Some(1.3), Some(2.5)] {
+                starts.push(starts::start_on_axis_line(
+                    &axis_sample,
+                    axis,
+                    on_axis,
+                    hint,
+                    a4,
+                ));
+            }
+        }
+        if let Some(across) =
+            starts::across_line_of_sight(axis, o.viewpoint.position().map(|v| norm.point(v)))
+                .filter(|_| start_set == StartSet::AcrossLineOfSight && o.known_axis.is_none())
+            && let Some(on_across) =
+                starts::axis_point_for_direction(&axis_sample, &normals, across)
+        {
+            for a4 in [None, Some(1.3), Some(2.5)] {
+                across_starts.push(starts::start_on_axis_line(
+                    &axis_sample,
+                    across,
+                    on_across,
+                    axis,
+                    a4,
+                ));
+            }
+        }
+    }
+    if paper {
+        // x, y, z of the cloud's frame, centroid, a3 = 0.6 of the half-diagonal
+        let (lo, hi) = stage1_pts
+            .iter()
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(*p), hi.max(*p))
+            });
+        let a3 = 0.6 * 0.5 * (hi - lo).length();
+        let axes_to_try = match o.known_axis {
+            Some(a) => vec![a.normalize()],
+            None => vec![DVec3::X, DVec3::Y, DVec3::Z],
+        };
+        for axis in axes_to_try {
+            let hint = if axis.dot(DVec3::X).abs() > 0.9 {
+                DVec3::Y
+            } else {
+                DVec3::X
+            };
+            let mut start = start_for_axis(&stage1_pts, axis, hint, 1.5);
+            start.shape.a3 = a3;
+            starts.push(start);
+        }
+    } else {
+        for axis in &axes_to_try {
+            let hint = if axis.dot(axes.x_axis).abs() > 0.9 {
+                axes.y_axis
+            } else {
+                axes.x_axis
+            };
+            for a4 in [1.5, 3.0] {
+                starts.push(start_for_axis(&stage1_pts, *axis, hint, a4));
+            }
+        }
+    }
+    let mut opts1 = SolverOptions {
+        loss,
+        max_iterations: 40,
+        cost_tolerance: 1e-5,
+        prune_after: if paper { 0 } else { 4 },
+        prune_ratio: 1.5,
+        // starts that met in one basin run on as one (the paper clouds' stage 1 sends
+        // two to five of its twelve starts into one basin)
+        merge_tolerance: if paper { 0.0 } else { MERGE_TOLERANCE },
+        // normalised units (the cloud's RMS radius is 1): stage 2 polishes
+        step_tolerance: 1e-3,
+        ..Default::default()
+    };
+    if o.known_axis.is_some() {
+        opts1.fixed[9] = true;
+        opts1.fixed[10] = true;
+    }
+    // known shape parameters: validated, put into every start and held fixed
+    let mut known = [None; 6];
+    for (i, value) in o.known_shape.iter().enumerate() {
+        let Some(value) = *value else { continue };
+        // sizes go into the normalised frame
+        let v = if i < 3 { value / norm.scale } else { value };
+        let plausible = match i {
+            0..3 => (0.002..=5.0).contains(&v),
+            3 => (0.0..bounds.upper[3]).contains(&v),
+            _ => (o.eps_min..=o.eps_max).contains(&v),
+        };
+        if !(v.is_finite() && plausible) {
+            return Err(FitError::InvalidOption(format!(
+                "{} = {value} is not plausible{}",
+                SHAPE_NAMES[i],
+                match i {
+                    0..3 => " for a cloud of this size".to_string(),
+                    3 => format!(" (0 <= a4 < {})", bounds.upper[3]),
+                    _ => format!(" (eps within {} and {})", o.eps_min, o.eps_max),
+                }
+            )));
+        }
+        opts1.fixed[i] = true;
+        known[i] = Some(v);
+    }
+    for start in starts.iter_mut().chain(&mut across_starts) {
+        start.shape = holding_known(start.shape, &known);
+    }
+    // with a1 and a2 both held, the in-plane turn cannot trade them any more: each start
+    // also goes a quarter turn about its axis
+    if known[0].is_some() && known[1].is_some() {
+        for starts in [&mut starts, &mut across_starts] {
+            let turned: Vec<Candidate> = starts
+                .iter()
+                .map(|s| {
+                    let mut t = *s;
+                    t.pose.rotation =
+                        s.pose.rotation * DQuat::from_rotation_z(std::f64::consts::FRAC_PI_2);
+                    t
+                })
+                .collect();
+            starts.extend(turned);
+        }
+    }
+
+    let opts2 = SolverOptions {
+        loss,
+        shape_prior: [0.0, 0.0, o.a3_penalty, -a4_reward, 0.0, 0.0],
+        fixed: opts1.fixed,
+        // steps of 1e-4 of the cloud's RMS radius no longer move the fit; near the end
+        // Gauss-Newton on a Huber loss converges only linearly, so this saves half the
+        // iterations
+        step_tolerance: 1e-4,
+        // a cap for the tail latency: the 24-case sweeps and the paper clouds gave the
+        // same successes and grades at 30 as at 60
+        max_iterations: 30,
+        ..Default::default()
+    };
+    Ok(Prepared {
+        points,
+        method: o.method,
+        norm,
+        stage1_pts,
+        stage2_pts,
+        stage1_free,
+        stage2_free,
+        starts: match start_set {
+            StartSet::Usual => starts,
+            StartSet::AcrossLineOfSight => across_starts,
+        },
+        bounds,
+        opts1,
+        opts2,
+        runner_up_ratio: (!paper).then_some(o.runner_up_ratio),
+        hole_preference,
+        max_overreach: (!paper).then_some(MAX_OVERREACH),
+        refine_scale: (!paper && o.refine_scale > 0.0).then_some(o.refine_scale),
+        viewpoint: o.viewpoint.position().map(|v| norm.point(v)),
+        known,
+        noise_model: !paper && o.noise_model,
+        known_axis: o.known_axis.is_some(),
+        scatter: std::sync::OnceLock::new(),
+        skip: o.skip.clone(),
+    })
+}
+
+impl Prepared<'_> {
+    /// Stage 1's point set: its sample and the free-space points in front of it.
+    pub(super) fn stage1_set(&self) -> PointSet<'_> {
+        PointSet {
+            surface: &self.stage1_pts,
+            free_space: &self.stage1_free,
+        }
+    }
+
+    /// Stage 2's point set.
+    pub(super) fn stage2_set(&self) -> PointSet<'_> {
+        PointSet {
+            surface: &self.stage2_pts,
+            free_space: &self.stage2_free,
+        }
+    }
+
+    /// The cloud's own scatter in normalised units ([`scatter::local_scatter`]), measured
+    /// once.
+    pub(super) fn scatter(&self) -> Option<f64> {
+        *self
+            .scatter
+            .get_or_init(|| scatter::local_scatter(self.points).map(|s| s / self.norm.scale))
+    }
+
+    /// The solver's box for a stage-2 finalist: sizes no larger than `max_overreach`
+    /// times the stage-2 sample's half-extent along the finalist's axes, about its centre.
+    pub(super) fn supported_bounds(&self, candidate: &Candidate) -> Bounds {
+        let mut bounds = self.bounds;
+        if let Some(limit) = self.max_overreach {
+            let extent = half_extents_about(candidate, &self.stage2_pts);
+            for (i, e) in extent.to_array().into_iter().enumerate() {
+                bounds.upper[i] = bounds.upper[i].min((limit * e).max(10.0 * bounds.lower[i]));
+            }
+        }
+        // a known size stays what it is, supported or not
+        for (i, v) in self.known.iter().enumerate() {
+            if let Some(v) = *v {
+                bounds.lower[i] = bounds.lower[i].min(0.5 * v);
+                bounds.upper[i] = bounds.upper[i].max(2.0 * v);
+            }
+        }
+        bounds
+    }
+
+    /// What the noise model may move from `start`: the supported box, the known shape
+    /// parameters and the known axis held.
+    pub(super) fn likelihood_limits(&self, start: &Candidate) -> likelihood::Limits {
+        likelihood::Limits {
+            bounds: self.supported_bounds(start),
+            fixed_shape: self.known.map(|k| k.is_some()),
+            fixed_axis: self.known_axis,
+        }
+    }
+
+    /// The other reading of the top view of `fitted` ([`starts::turned_dual`]) inside its
+    /// supported box; none where the caller's dimensions fix a1, a2 or eps2.
+    pub(super) fn turned_dual(&self, fitted: &Candidate) -> Option<Candidate> {
+        if self.known[0].is_some() || self.known[1].is_some() || self.known[5].is_some() {
+            return None;
+        }
+        // a roundish top view is its own other reading
+        if (fitted.shape.eps2 - 1.0).abs() < DUAL_MIN_ROUNDNESS_GAP {
+            return None;
+        }
+        let mut dual = starts::turned_dual(fitted);
+        dual.shape = self.supported_bounds(fitted).interior(&dual.shape);
+        Some(dual)
+    }
+
+    /// Bodies collapsed onto the stage-2 sample along the hole axis of `fitted`
+    /// ([`start_for_axis`] with each of the [`RESCUE_A4`]), the known dimensions held;
+    /// and, for a view across the hole axis, each of them again moved away from the
+    /// sensor by its mean radius ([`behind_the_skin`]).
+    pub(super) fn collapsed_starts(&self, fitted: &Candidate) -> Vec<Candidate> {
+        let axis = fitted.pose.axis();
+        let hint = fitted.pose.rotation * DVec3::X;
+        let collapsed: Vec<Candidate> = RESCUE_A4
+            .iter()
+            .map(|&a4| {
+                let mut start = start_for_axis(&self.stage2_pts, axis, hint, a4);
+                start.shape = holding_known(start.shape, &self.known);
+                start
+            })
+            .collect();
+        let behind: Vec<Candidate> = collapsed
+            .iter()
+            .filter_map(|start| behind_the_skin(start, self.viewpoint?))
+            .collect();
+        collapsed.into_iter().chain(behind).collect()
+    }
+
+    /// Each start (with a hole) refined by the noise model seen from `viewpoint`, the
+    /// [`RESCUE_KEPT`] most likely after [`RESCUE_FIRST_ITERATIONS`] on to convergence; of
+    /// those whose visible surface the points cover and whose free space holds, the most
+    /// likely.
+    pub(super) fn most_likely_covered(
+        &self,
+        starts: Vec<Candidate>,
+        viewpoint: DVec3,
+    ) -> Option<likelihood::Refined> {
+        let refine = |start: &Candidate, sigma: f64, iterations: usize| {
+            likelihood::refine(
+                &self.stage2_pts,
+                start,
+                sigma,
+                LIKELIHOOD_OUTLIER_WEIGHT,
+                Some(viewpoint),
+                &self.likelihood_limits(start),
+                iterations,
+            )
+        };
+        let mut first: Vec<likelihood::Refined> = starts
+            .into_iter()
+            .filter(|s| s.shape.a4 > 1.0)
+            .filter_map(|mut start| {
+                let noise = report::noise_sigma(
+                    &start.shape,
+                    &start.pose,
+                    &self.stage2_pts,
+                    NOISE_CHECK_SAMPLE,
+                );
+                // a collapsed start's section must hold the noise's spread
+                if self.known[2].is_none() {
+                    start.shape.a3 = start.shape.a3.max(2.0 * noise);
+                }
+                refine(&start, noise, RESCUE_FIRST_ITERATIONS)
+            })
+            .collect();
+        first.sort_by(|a, b| a.objective.total_cmp(&b.objective));
+        let converge = |r: &likelihood::Refined, start: &Candidate| {
+            let more = refine(start, r.sigma, likelihood::MAX_ITERATIONS)?;
+            Some(likelihood::Refined {
+                iterations: r.iterations + more.iterations,
+                ..more
+            })
+        };
+        let kept: Vec<likelihood::Refined> = first
+            .iter()
+            .take(RESCUE_KEPT)
+            .filter_map(|r| converge(r, &r.candidate))
+            .collect();
+        // and the other reading of each one's top view, where it is the more likely after
+        // a few steps
+        let duals: Vec<likelihood::Refined> = kept
+            .iter()
+            .filter_map(|r| {
+                let opening = refine(
+                    &self.turned_dual(&r.candidate)?,
+                    r.sigma,
+                    DUAL_FIRST_ITERATIONS,
+                )?;
+                (opening.objective < r.objective).then(|| converge(&opening, &opening.candidate))?
+            })
+            .collect();
+        // (a dual must be more likely by DUAL_READING_MARGIN)
+        let merits = kept.into_iter().map(|r| (r.objective, r)).chain(
+            duals
+                .into_iter()
+                .map(|r| (r.objective + DUAL_READING_MARGIN, r)),
+        );
+        merits
+            .filter(|(_, r)| !collapsed_section(r))
+            .filter(|(_, r)| {
+                coverage::visible_coverage(&r.candidate, &self.stage2_pts, viewpoint)
+                    >= coverage::MIN_VISIBLE_COVERAGE
+                    && free_space::violated_fraction(&r.candidate, &self.stage2_free)
+                        <= free_space::MAX_VIOLATED_FRACTION
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, r)| r)
+    }
+
+    pub(super) fn overreaches(&self, candidate: &Candidate, sample: &[DVec3]) -> bool {
+        self.max_overreach
+            .is_some_and(|limit| overreach(candidate, sample) > limit)
+    }
+}
+
+/// The cloud's largest |x|, |y|, |z| in the candidate's canonical frame.
+pub(super) fn half_extents_about(candidate: &Candidate, points: &[DVec3]) -> DVec3 {
+    let inverse = candidate.pose.rotation.inverse();
+    points.iter().fold(DVec3::ZERO, |e, p| {
+        e.max((inverse * (*p - candidate.pose.translation)).abs())
+    })
+}
