@@ -38,7 +38,7 @@
 //! moving the view weights in the gradient) and the kernel cut at 4 sigmas instead of
 //! 3.5 ([`CUTOFF`]), 268 and 238 (with the rescue and retries of `fit`).
 
-mod visibility;
+pub(crate) mod visibility;
 
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};
@@ -120,7 +120,7 @@ fn bounding_box(points: &[DVec3]) -> (DVec3, DVec3) {
 /// near the surface for outliers (at the true parameters, 10% outliers read as 4-7%), and
 /// counted the rest as surface points blurring a thicker section: sizes 10-16% too large
 /// on noisy single views (40160, 40161, 50053, 60179).
-fn outlier_volume(points: &[DVec3], sigma: f64) -> f64 {
+pub fn outlier_volume(points: &[DVec3], sigma: f64) -> f64 {
     let (axes, _) = super::principal_axes(points);
     let along: Vec<DVec3> = points.iter().map(|p| axes.transpose() * *p).collect();
     let (lo, hi) = bounding_box(&along);

@@ -38,6 +38,7 @@ pub mod ground_truth;
 mod inferred_view;
 mod ledger;
 pub mod likelihood;
+pub mod objective;
 mod prepare;
 mod report;
 mod rescue;

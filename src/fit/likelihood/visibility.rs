@@ -7,14 +7,14 @@ use rayon::prelude::*;
 /// What a sensor at `viewpoint` sees of the surface at one parameter vector: which cells
 /// (held for that vector's shape differences) and the squared range of the cells' centre
 /// (the reference of [`View::weights`]).
-pub(super) struct View {
-    pub(super) viewpoint: DVec3,
-    pub(super) visible: Vec<bool>,
-    pub(super) reference: f64,
+pub(crate) struct View {
+    pub(crate) viewpoint: DVec3,
+    pub(crate) visible: Vec<bool>,
+    pub(crate) reference: f64,
 }
 
 impl View {
-    pub(super) fn new(
+    pub(crate) fn new(
         cells: &[DVec3],
         areas: &[f64],
         normals: &[DVec3],
@@ -72,7 +72,7 @@ impl View {
 /// 30161) and the model from the truth recovers 532 of 540 cases instead of 528
 /// (`examples/model_ceiling.rs`, all points; 527 instead of 520 on the fit's sample). It
 /// costs about 1.3 ms per evaluation at 19,000 cells (0.5 ms before; two threads).
-pub(super) fn visibility(
+pub(crate) fn visibility(
     cells: &[DVec3],
     areas: &[f64],
     normals: &[DVec3],

@@ -1,0 +1,455 @@
+//! The fit's objective: the likelihood of the cloud under a model of how a sensor makes
+//! it. Points lie on the surface, blurred by isotropic Gaussian noise of an unknown sigma,
+//! plus a share of outliers spread over the cloud's box:
+//!
+//!   p(x) = (1 - w) · W(x) / A · ∫_S N(x; s, sigma² I) dA(s) + w / V
+//!
+//! Without a viewpoint W = 1 and A is the surface's area. Seen from a viewpoint, the
+//! sensor's points fall at cos(incidence) / range² per unit area over the surface it
+//! sees: inside the integral each surface element counts with its own incidence and
+//! visibility, W(x) = 1 / range(x)² (relative to a reference range), and A is the
+//! integral of the same density over the surface, so a candidate that shows the sensor
+//! surface without points pays for it in A.
+//!
+//! Why a likelihood: any least-squares distance fit is biased once the noise is a
+//! sizeable part of the thinnest half-axis (noise rounds a square section, fills a pinched
+//! one, and spreads points further outside a thin section than inside). The likelihood
+//! models the blur instead of measuring through it, so its maximum sits at the true
+//! surface whatever the noise.
+//!
+//! The integral is a tensor-product sum over the surface's own parameters (section nodes
+//! times sweep samples, [`tables`]), and each point visits only the window of it within
+//! [`CUTOFF`] sigmas: its sweep sample from its polar angle, its section nodes from their
+//! heights and radii. No surface grid is built per evaluation but the normaliser's coarse
+//! one ([`normaliser`]).
+//!
+//! Parameters: shape a1 a2 a3 a4 eps1 eps2, translation, a rotation vector applied on the
+//! left of the reference rotation (world frame), ln sigma. The gradient is analytic but
+//! for A (differences of its grid); the Hessian is the BHHH outer product of the points'
+//! scores.
+
+mod normaliser;
+mod refine;
+pub mod tables;
+
+pub use refine::{Limits, Refined, STOP_DECREASE, refine, value};
+
+use crate::eval::Candidate;
+use crate::model::{Pose, Shape};
+use glam::{DQuat, DVec3};
+use nalgebra::{SMatrix, SVector};
+use normaliser::Normaliser;
+use rayon::prelude::*;
+use std::f64::consts::TAU;
+use tables::{Grid, SectionTable, SweepTable};
+
+/// The number of the model's parameters (see the module docs).
+pub const PARAMETERS: usize = 13;
+pub type Vector = SVector<f64, PARAMETERS>;
+pub type Matrix = SMatrix<f64, PARAMETERS, PARAMETERS>;
+
+/// Points meet the surface within this many sigmas; the kernel is shifted down by its
+/// value there so that it reaches zero continuously.
+pub const CUTOFF: f64 = 4.0;
+
+/// The sensor seen from the model: where it was, and each point's range weight.
+#[derive(Clone, Debug)]
+pub struct Sensor {
+    pub viewpoint: DVec3,
+    /// per point: reference / range²
+    pub point_weights: Vec<f64>,
+    /// the squared range the weights are relative to (a common factor: it cancels)
+    pub reference: f64,
+}
+
+impl Sensor {
+    /// The sensor at `viewpoint` (normalised frame) for `points`.
+    pub fn new(points: &[DVec3], viewpoint: DVec3) -> Self {
+        let centre = points.iter().copied().sum::<DVec3>() / points.len().max(1) as f64;
+        let reference = (centre - viewpoint).length_squared().max(1e-12);
+        let point_weights = points
+            .iter()
+            .map(|p| reference / (*p - viewpoint).length_squared().max(1e-12))
+            .collect();
+        Self {
+            viewpoint,
+            point_weights,
+            reference,
+        }
+    }
+}
+
+/// The data of one objective: the points, the outlier model and the sensor.
+pub struct Data<'a> {
+    pub points: &'a [DVec3],
+    pub outlier_weight: f64,
+    /// w / V, the outliers' density
+    pub outlier_density: f64,
+    pub sensor: Option<&'a Sensor>,
+}
+
+/// The parameter vector of a candidate and sigma (the turn zero: the candidate's rotation
+/// is the reference).
+pub fn parameters(candidate: &Candidate, sigma: f64) -> Vector {
+    let s = candidate.shape;
+    let t = candidate.pose.translation;
+    Vector::from_column_slice(&[
+        s.a1,
+        s.a2,
+        s.a3,
+        s.a4,
+        s.eps1,
+        s.eps2,
+        t.x,
+        t.y,
+        t.z,
+        0.0,
+        0.0,
+        0.0,
+        sigma.ln(),
+    ])
+}
+
+/// The objective at one reference rotation and quadrature grid (both held for a run of
+/// evaluations so the line search sees one function).
+pub struct Objective<'a> {
+    pub data: &'a Data<'a>,
+    pub rotation0: DQuat,
+    pub grid: Grid,
+}
+
+/// One point's sums over its window: the kernel sum and its partials.
+#[derive(Default)]
+struct PointSums {
+    sum: f64,
+    /// d sum / d shape via the surface positions, weights and sigma (ln sigma last)
+    shape: [f64; 6],
+    ln_sigma: f64,
+    /// d sum / d q (canonical point) and d sum / d v (canonical sight line)
+    by_point: DVec3,
+    by_sight: DVec3,
+}
+
+impl<'a> Objective<'a> {
+    pub fn new(data: &'a Data<'a>, candidate: &Candidate, sigma: f64) -> Self {
+        Self {
+            data,
+            rotation0: candidate.pose.rotation,
+            grid: Grid::for_shape(&candidate.shape, sigma),
+        }
+    }
+
+    pub fn rotation(&self, x: &Vector) -> DQuat {
+        DQuat::from_scaled_axis(DVec3::new(x[9], x[10], x[11])) * self.rotation0
+    }
+
+    pub fn shape(x: &Vector) -> Shape {
+        Shape::new(x[0], x[1], x[2], x[3], x[4], x[5])
+    }
+
+    pub fn candidate(&self, x: &Vector) -> Candidate {
+        Candidate {
+            shape: Self::shape(x),
+            pose: Pose::new(self.rotation(x).normalize(), DVec3::new(x[6], x[7], x[8])),
+        }
+    }
+
+    /// The mean negative log-likelihood per point; with `with_gradient` also its
+    /// gradient and the BHHH approximation of its Hessian.
+    pub fn evaluate(&self, x: &Vector, with_gradient: bool) -> (f64, Vector, Matrix) {
+        let shape = Self::shape(x);
+        let sigma = x[12].exp();
+        let rotation = self.rotation(x);
+        let translation = DVec3::new(x[6], x[7], x[8]);
+        let sensor = self.data.sensor;
+        let normaliser = normaliser::normaliser(
+            &shape,
+            rotation,
+            translation,
+            sensor.map(|s| (s.viewpoint, s.reference)),
+            with_gradient,
+        );
+        let window = Window::new(&self.grid, &shape, sigma, &normaliser);
+        let inverse = rotation.inverse();
+        let kernel_scale = (std::f64::consts::TAU * sigma * sigma).powf(-1.5);
+        let inlier = (1.0 - self.data.outlier_weight) * kernel_scale / normaliser.area;
+        let point_term = |i: usize, x_world: DVec3| -> (f64, Vector) {
+            let d = x_world - translation;
+            let q = inverse * d;
+            let sight = sensor.map(|s| inverse * (x_world - s.viewpoint));
+            let sums = window.sums(q, sight, with_gradient);
+            let weight = sensor.map_or(1.0, |s| s.point_weights[i]);
+            let density = inlier * weight * sums.sum + self.data.outlier_density;
+            let mut grad = Vector::zeros();
+            if with_gradient {
+                let f = inlier * weight / density;
+                grad.fixed_rows_mut::<6>(0).copy_from_slice(&sums.shape);
+                let by_point = rotation * sums.by_point;
+                grad[6] = -by_point.x;
+                grad[7] = -by_point.y;
+                grad[8] = -by_point.z;
+                let mut turn = by_point.cross(d);
+                if let Some(s) = sensor {
+                    turn += (rotation * sums.by_sight).cross(x_world - s.viewpoint);
+                }
+                grad[9] = turn.x;
+                grad[10] = turn.y;
+                grad[11] = turn.z;
+                // (2 pi sigma²)^-3/2
+                grad[12] = sums.ln_sigma - 3.0 * sums.sum;
+                grad *= f;
+                let share = f * sums.sum;
+                for k in 0..12 {
+                    grad[k] -= share * normaliser.d_log_area[k];
+                }
+            }
+            (density.ln(), grad)
+        };
+        let n = self.data.points.len() as f64;
+        let zero = || (0.0, Vector::zeros(), Matrix::zeros());
+        let (log_likelihood, gradient, outer) = self
+            .data
+            .points
+            .par_iter()
+            .enumerate()
+            .with_min_len(64)
+            .fold(zero, |mut acc, (i, p)| {
+                let (l, g) = point_term(i, *p);
+                acc.0 += l;
+                if with_gradient {
+                    acc.1 += g;
+                    acc.2 += g * g.transpose();
+                }
+                acc
+            })
+            .reduce(zero, |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+        (-log_likelihood / n, -gradient / n, outer / n)
+    }
+}
+
+/// The quadrature at one parameter vector: both tables, the visibility of each node and
+/// sample, and the kernel's constants.
+struct Window<'a> {
+    shape: Shape,
+    section: SectionTable,
+    sweep: SweepTable,
+    /// per section node and per sweep sample: its cell of the normaliser's grid
+    rings: Vec<usize>,
+    sectors: Vec<usize>,
+    /// per sweep sample: its polar angle in the canonical x-y plane (rising in [0, 2 pi))
+    polar: Vec<f64>,
+    normaliser: &'a Normaliser,
+    var: f64,
+    cut: f64,
+    floor: f64,
+}
+
+impl<'a> Window<'a> {
+    fn new(grid: &Grid, shape: &Shape, sigma: f64, normaliser: &'a Normaliser) -> Self {
+        let sweep = SweepTable::new(grid, shape.a1, shape.a2, shape.eps2);
+        let sectors = (0..grid.sweep)
+            .map(|m| Normaliser::sector_of(m as f64 * sweep.step))
+            .collect();
+        let polar = sweep
+            .point
+            .iter()
+            .map(|[x, y]| y.atan2(*x).rem_euclid(TAU))
+            .collect();
+        Self {
+            shape: *shape,
+            polar,
+            section: SectionTable::new(grid, shape.eps1),
+            rings: grid
+                .section
+                .iter()
+                .map(|&phi| normaliser.ring_of(phi))
+                .collect(),
+            sectors,
+            sweep,
+            normaliser,
+            var: sigma * sigma,
+            cut: CUTOFF * sigma,
+            floor: (-0.5 * CUTOFF * CUTOFF).exp(),
+        }
+    }
+
+    /// The sweep samples whose polar angle (in the canonical x-y plane) lies in
+    /// [from, to] (a span of at most a turn): the first and how many, wrapping round.
+    fn sweep_range(&self, from: f64, to: f64) -> (usize, usize) {
+        let count = self.polar.len();
+        let first = |angle: f64| {
+            let turns = angle.div_euclid(TAU);
+            let index = self.polar.partition_point(|&p| p < angle - turns * TAU);
+            index as isize + turns as isize * count as isize
+        };
+        let (lo, hi) = (first(from), first(to));
+        let span = ((hi - lo).max(0) as usize).min(count);
+        (lo.rem_euclid(count as isize) as usize, span)
+    }
+
+    /// n·v of each half of section node k's step against the sweep step (dx, dy), C x D
+    /// = `cross`, seen along canonical `v` (negative where it faces the sensor), over
+    /// lambda: n = (a3 tw dy, -a3 tw dx, -tc cross).
+    fn half_facing(&self, k: usize, dx: f64, dy: f64, cross: f64, v: DVec3) -> [f64; 2] {
+        let a3 = self.shape.a3;
+        self.section.halves[k].map(|[tc, tw]| a3 * tw * (dy * v.x - dx * v.y) - tc * cross * v.z)
+    }
+
+    /// |n| of each half of section node k's step against the sweep step (dx, dy) with
+    /// C x D = `cross` (the surface element's area over lambda).
+    fn half_areas(&self, k: usize, dx: f64, dy: f64, cross: f64) -> [f64; 2] {
+        let a3 = self.shape.a3;
+        self.section.halves[k].map(|[tc, tw]| {
+            (a3 * a3 * tw * tw * (dx * dx + dy * dy) + tc * tc * cross * cross).sqrt()
+        })
+    }
+
+    /// The kernel sum of canonical point `q` (seen along canonical `sight`, from the
+    /// viewpoint to the point) over the surface within the cutoff, with its partials.
+    fn sums(&self, q: DVec3, sight: Option<DVec3>, with_gradient: bool) -> PointSums {
+        let Shape { a1, a2, a3, a4, .. } = self.shape;
+        let _ = (a1, a2);
+        let mut out = PointSums::default();
+        let count = self.sweep.point.len();
+        let rho = q.x.hypot(q.y);
+        let cut2 = self.cut * self.cut;
+        let sight_length = sight.map_or(1.0, |v| v.length().max(1e-300));
+        // every surface point within the cutoff lies, seen along the axis, in the disc of
+        // that radius about the point: within asin(cut / rho) of its polar angle (all
+        // round where the disc holds the axis), whatever its section node
+        let (first, span) = if rho <= self.cut {
+            (0, count)
+        } else {
+            let half = (self.cut / rho).asin();
+            let polar = q.y.atan2(q.x).rem_euclid(TAU);
+            self.sweep_range(polar - half, polar + half)
+        };
+        for k in 0..self.section.point.len() {
+            let [c, w] = self.section.point[k];
+            let lambda = a4 + c;
+            if lambda <= 0.0 {
+                continue;
+            }
+            let dz = q.z - a3 * w;
+            if dz * dz >= cut2 {
+                continue;
+            }
+            for j in 0..span {
+                let m = (first + j) % count;
+                let [cx, cy] = self.sweep.point[m];
+                let (ex, ey) = (q.x - lambda * cx, q.y - lambda * cy);
+                let d2 = ex * ex + ey * ey + dz * dz;
+                if d2 >= cut2 {
+                    continue;
+                }
+                let [dx, dy] = self.sweep.tangent[m];
+                let cross = cx * dy - cy * dx;
+                // the surface element's weight: its area, or seen by the sensor its
+                // projected area lambda·(-n·v)/|v|, n = (a3 tw dy, -a3 tw dx, -tc cross)
+                // (the two halves of the section's step one by one: at a sharp corner
+                // one may face the sensor and the other not, and their areas add up where
+                // the step's own would cut the corner)
+                let weight = match sight {
+                    Some(v) => {
+                        if !self.normaliser.sees(self.rings[k], self.sectors[m]) {
+                            continue;
+                        }
+                        let facing = self.half_facing(k, dx, dy, cross, v);
+                        let projected = facing.iter().map(|f| (-f).max(0.0)).sum::<f64>();
+                        if projected <= 0.0 {
+                            continue;
+                        }
+                        lambda * projected / sight_length
+                    }
+                    None => lambda * self.half_areas(k, dx, dy, cross).iter().sum::<f64>(),
+                };
+                let gauss = (-0.5 * d2 / self.var).exp();
+                let term = weight * (gauss - self.floor);
+                out.sum += term;
+                if !with_gradient {
+                    continue;
+                }
+                // d term = slope · d(-d²/2) + term · d ln weight
+                let slope = weight * gauss / self.var;
+                let e = DVec3::new(ex, ey, dz);
+                out.by_point -= slope * e;
+                let [dc, dw] = self.section.d_point[k];
+                let [dcx, dcy] = self.sweep.d_point[m];
+                let radial = ex * cx + ey * cy;
+                // through the surface position S = (lambda C, a3 w)
+                let mut by_shape = [
+                    ex * lambda * cx / a1,
+                    ey * lambda * cy / a2,
+                    dz * w,
+                    radial,
+                    radial * dc + dz * a3 * dw,
+                    lambda * (ex * dcx + ey * dcy),
+                ];
+                for v in &mut by_shape {
+                    *v *= slope;
+                }
+                out.ln_sigma += slope * d2;
+                // through the weight: ln lambda, then the area or the projected area
+                let [ddx, ddy] = self.sweep.d_tangent[m];
+                let d_cross = dcx * dy + cx * ddy - dcy * dx - cy * ddx;
+                let mut log_weight = [0.0, 0.0, 0.0, 1.0 / lambda, dc / lambda, 0.0];
+                match sight {
+                    Some(v) => {
+                        // d ln sum_h (-facing_h) over the halves that face the sensor
+                        let facing = self.half_facing(k, dx, dy, cross, v);
+                        let total: f64 = facing.iter().map(|f| (-f).max(0.0)).sum();
+                        let turn = dy * v.x - dx * v.y;
+                        for h in 0..2 {
+                            if facing[h] >= 0.0 {
+                                continue;
+                            }
+                            let [tc, tw] = self.section.halves[k][h];
+                            let [dtc, dtw] = self.section.d_halves[k][h];
+                            let per = 1.0 / -total;
+                            // (D scales with a1 along x and a2 along y, the cross with a1·a2)
+                            log_weight[0] += (a3 * tw * (-dx * v.y) - tc * cross * v.z) / a1 * per;
+                            log_weight[1] += (a3 * tw * (dy * v.x) - tc * cross * v.z) / a2 * per;
+                            log_weight[2] += tw * turn * per;
+                            log_weight[4] += (a3 * dtw * turn - dtc * cross * v.z) * per;
+                            log_weight[5] +=
+                                (a3 * tw * (ddy * v.x - ddx * v.y) - tc * d_cross * v.z) * per;
+                            out.by_sight +=
+                                term * DVec3::new(a3 * tw * dy, -a3 * tw * dx, -tc * cross) * per;
+                        }
+                    }
+                    None => {
+                        // d|n| = d|n|² / 2|n| for each half, over their sum
+                        let dd = dx * dx + dy * dy;
+                        let areas = self.half_areas(k, dx, dy, cross);
+                        let total = areas[0] + areas[1];
+                        for h in 0..2 {
+                            let [tc, tw] = self.section.halves[k][h];
+                            let [dtc, dtw] = self.section.d_halves[k][h];
+                            let per = 1.0 / (areas[h].max(1e-300) * total);
+                            if areas[h] == 0.0 {
+                                continue;
+                            }
+                            log_weight[0] +=
+                                (a3 * a3 * tw * tw * dx * dx + tc * tc * cross * cross) / a1 * per;
+                            log_weight[1] +=
+                                (a3 * a3 * tw * tw * dy * dy + tc * tc * cross * cross) / a2 * per;
+                            log_weight[2] += a3 * tw * tw * dd * per;
+                            log_weight[4] +=
+                                (a3 * a3 * tw * dtw * dd + tc * dtc * cross * cross) * per;
+                            log_weight[5] += (a3 * a3 * tw * tw * (dx * ddx + dy * ddy)
+                                + tc * tc * cross * d_cross)
+                                * per;
+                        }
+                    }
+                }
+                for p in 0..6 {
+                    out.shape[p] += by_shape[p] + term * log_weight[p];
+                }
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests;
