@@ -94,7 +94,7 @@ impl Presentation {
 
 /// A case's cloud as `presentation` gives it to the fit, with its viewpoint option and
 /// the pose that maps the fit back to the suite's frame.
-pub(crate) fn presented(
+pub fn presented(
     case: &crate::fit::ground_truth::Case,
     presentation: Presentation,
 ) -> (Vec<glam::DVec3>, Viewpoint, Pose) {

@@ -43,6 +43,7 @@ mod prepare;
 mod report;
 mod rescue;
 pub mod scatter;
+mod search;
 pub mod starts;
 pub mod viewpoint;
 
@@ -424,6 +425,11 @@ pub fn fit_batch(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
+    if std::env::var("SUPERTOROID_PIPELINE").as_deref() != Ok("old")
+        && clouds.iter().all(|(_, o)| o.method == Method::Default)
+    {
+        return fit_batch_searched(evaluator, clouds);
+    }
     let mut resolved: Vec<(FitOptions, ViewpointUsed)> = clouds
         .iter()
         .map(|(points, o)| {
@@ -529,6 +535,198 @@ pub fn fit_batch(
         }
     }
     Ok(results)
+}
+
+/// [`fit_batch`] by one bounded search ([`search`]). Each cloud's viewpoint is resolved
+/// first; a cloud whose viewpoint was only inferred (the frame's origin) is searched
+/// both as a view from there and as a view from nowhere, in the same lockstep batch, and
+/// the fit more likely under its own reading of the cloud stands. A given viewpoint that
+/// the fit contradicts is dropped with a warning and the cloud searched again.
+fn fit_batch_searched(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
+    let mut resolved: Vec<(FitOptions, ViewpointUsed)> = clouds
+        .iter()
+        .map(|(points, o)| {
+            let (viewpoint, used) = viewpoint::resolve(o.viewpoint, points);
+            (
+                FitOptions {
+                    viewpoint,
+                    ..(*o).clone()
+                },
+                used,
+            )
+        })
+        .collect();
+    // the inferred views' other reading, searched beside them
+    let nowhere: Vec<(usize, FitOptions)> = resolved
+        .iter()
+        .enumerate()
+        .filter(|(_, (o, _))| inferred(o))
+        .map(|(i, (o, _))| {
+            (
+                i,
+                FitOptions {
+                    viewpoint: Viewpoint::None,
+                    ..o.clone()
+                },
+            )
+        })
+        .collect();
+    let mut batch = with_resolved(clouds, &resolved);
+    batch.extend(nowhere.iter().map(|(i, o)| (clouds[*i].0, o)));
+    let twins: Vec<(usize, usize)> = nowhere
+        .iter()
+        .enumerate()
+        .map(|(k, (i, _))| (*i, clouds.len() + k))
+        .collect();
+    let (mut results, dropped) = searched_once(evaluator, &batch, &twins)?;
+    let others = results.split_off(clouds.len());
+    for (k, ((i, options), other)) in nowhere.iter().zip(others).enumerate() {
+        let (Ok(view), Ok(other)) = (&results[*i], other) else {
+            continue;
+        };
+        let viewpoint = resolved[*i].0.viewpoint.position().expect("an inferred viewpoint");
+        let test = search::ViewTest::new(clouds[*i].0, viewpoint, options.stage2_points);
+        // (negative log-likelihoods: lower is likelier)
+        let all_round = match (dropped[*i], dropped[clouds.len() + k]) {
+            (true, _) => true,
+            (_, true) => false,
+            _ => test.score(&other, false) < test.score(view, true),
+        };
+        if all_round {
+            let used = &mut resolved[*i].1;
+            *used = ViewpointUsed {
+                position: None,
+                source: ViewpointSource::None,
+                reason: format!(
+                    "{}, but the points are more likely spread all round the object than \
+                     seen from there: fitted as a view from nowhere",
+                    used.reason
+                ),
+            };
+            results[*i] = Ok(other);
+        }
+    }
+    // a given viewpoint the fit contradicts goes: those clouds again without it
+    let contradicted: Vec<(usize, f64)> = results
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            let violated = r.as_ref().ok()?.free_space_violation?;
+            (violated > free_space::MAX_VIOLATED_FRACTION && !inferred(&resolved[i].0))
+                .then_some((i, violated))
+        })
+        .collect();
+    if !contradicted.is_empty() {
+        let started = Instant::now();
+        let options: Vec<FitOptions> = contradicted
+            .iter()
+            .map(|&(i, _)| FitOptions {
+                viewpoint: Viewpoint::None,
+                ..resolved[i].0.clone()
+            })
+            .collect();
+        let batch: Vec<(&[DVec3], &FitOptions)> = contradicted
+            .iter()
+            .zip(&options)
+            .map(|(&(i, _), o)| (clouds[i].0, o))
+            .collect();
+        let (refits, _) = searched_once(evaluator, &batch, &[])?;
+        let waited = started.elapsed().as_secs_f64() * 1e3;
+        for (&(i, violated), refit) in contradicted.iter().zip(refits) {
+            let spent = results[i].as_ref().map_or(0.0, |r| r.timing_ms.total) + waited;
+            let warning = format!(
+                "{VIEWPOINT_IGNORED}: {:.0}% of the lines of sight from it to the points pass \
+                 through the object fitted with it (more than {:.0}%), so the sensor was not \
+                 there, or the viewpoint is in another frame than the points; fitted without it",
+                100.0 * violated,
+                100.0 * free_space::MAX_VIOLATED_FRACTION
+            );
+            let used = &mut resolved[i].1;
+            *used = ViewpointUsed {
+                position: None,
+                source: ViewpointSource::None,
+                reason: format!("{}, but {warning}", used.reason),
+            };
+            results[i] = refit.map(|mut r| {
+                r.timing_ms.total = spent;
+                r.warnings.push(warning);
+                r
+            });
+        }
+    }
+    for (r, (_, used)) in results.iter_mut().zip(resolved) {
+        if let Ok(r) = r {
+            r.viewpoint = used;
+        }
+    }
+    Ok(results)
+}
+
+/// Every cloud prepared, grouped by solver settings, searched and reported; `twins` are
+/// pairs of clouds that are one cloud in two readings (see [`search::TWIN_MARGIN`]).
+/// With the clouds whose search went no further than round 2 for their twin.
+#[allow(clippy::type_complexity)]
+fn searched_once(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+    twins: &[(usize, usize)],
+) -> Result<(Vec<Result<FitReport, FitError>>, Vec<bool>), FitError> {
+    let mut dropped = vec![false; clouds.len()];
+    let start = Instant::now();
+    let mut results: Vec<Option<Result<FitReport, FitError>>> =
+        (0..clouds.len()).map(|_| None).collect();
+    let mut groups: Vec<Vec<(usize, Prepared)>> = Vec::new();
+    for (i, (points, o)) in clouds.iter().enumerate() {
+        match prepare(points, o, StartSet::Broad) {
+            Ok(p) => match groups.iter_mut().find(|g| {
+                let q = &g[0].1;
+                (q.bounds, q.opts1, q.opts2) == (p.bounds, p.opts1, p.opts2)
+            }) {
+                Some(g) => g.push((i, p)),
+                None => groups.push(vec![(i, p)]),
+            },
+            Err(e) => results[i] = Some(Err(e)),
+        }
+    }
+    for group in groups {
+        let local = |i: usize| group.iter().position(|(j, _)| *j == i);
+        let local_twins: Vec<(usize, usize)> = twins
+            .iter()
+            .filter_map(|&(a, b)| Some((local(a)?, local(b)?)))
+            .collect();
+        let found = search::search_group(evaluator, &group, &local_twins)?;
+        for ((i, p), f) in group.iter().zip(found) {
+            dropped[*i] = f.dropped;
+            let best = &f.best;
+            let mut r = report(
+                p,
+                &best.candidate,
+                best.iterations,
+                best.modelled.then_some(best.sigma),
+                f.stage1_iterations,
+                evaluator,
+            );
+            r.noise_modelled = best.modelled;
+            r.timing_ms = Timing {
+                stage1: f.round1_ms,
+                stage2: f.round2_ms + f.finalists_ms,
+                noise_model: f.finalists_ms,
+                total: start.elapsed().as_secs_f64() * 1e3,
+                ..Default::default()
+            };
+            results[*i] = Some(Ok(r));
+        }
+    }
+    Ok((
+        results
+            .into_iter()
+            .map(|r| r.expect("every cloud has a result"))
+            .collect(),
+        dropped,
+    ))
 }
 
 /// The start of the warning of a viewpoint the fit found contradicted by its points.

@@ -42,6 +42,10 @@ pub(super) enum StartSet {
     Usual,
     /// only the hole axes across the line of sight ([`starts::across_line_of_sight`])
     AcrossLineOfSight,
+    /// the search's broad set: the usual starts, the hole axes across the line of sight,
+    /// and the normal lines' starts moved behind the skin the sensor saw
+    /// ([`behind_the_skin`])
+    Broad,
 }
 
 /// One cloud, checked, normalised, sampled, with its stage-1 starts and solver settings.
@@ -185,7 +189,7 @@ pub(super) fn prepare<'a>(
         }
         if let Some(across) =
             starts::across_line_of_sight(axis, o.viewpoint.position().map(|v| norm.point(v)))
-                .filter(|_| start_set == StartSet::AcrossLineOfSight && o.known_axis.is_none())
+                .filter(|_| start_set != StartSet::Usual && o.known_axis.is_none())
             && let Some(on_across) =
                 starts::axis_point_for_direction(&axis_sample, &normals, across)
         {
@@ -320,6 +324,18 @@ pub(super) fn prepare<'a>(
         starts: match start_set {
             StartSet::Usual => starts,
             StartSet::AcrossLineOfSight => across_starts,
+            StartSet::Broad => {
+                // the normal lines' starts (the first three) behind the skin
+                let behind: Vec<Candidate> = match o.viewpoint.position() {
+                    Some(v) if !paper => starts
+                        .iter()
+                        .take(3)
+                        .filter_map(|s| behind_the_skin(s, norm.point(v)))
+                        .collect(),
+                    _ => Vec::new(),
+                };
+                starts.into_iter().chain(across_starts).chain(behind).collect()
+            }
         },
         bounds,
         opts1,
@@ -386,6 +402,15 @@ impl Prepared<'_> {
     /// parameters and the known axis held.
     pub(super) fn likelihood_limits(&self, start: &Candidate) -> likelihood::Limits {
         likelihood::Limits {
+            bounds: self.supported_bounds(start),
+            fixed_shape: self.known.map(|k| k.is_some()),
+            fixed_axis: self.known_axis,
+        }
+    }
+
+    /// What the likelihood may move from `start` ([`objective::Limits`]).
+    pub(super) fn objective_limits(&self, start: &Candidate) -> objective::Limits {
+        objective::Limits {
             bounds: self.supported_bounds(start),
             fixed_shape: self.known.map(|k| k.is_some()),
             fixed_axis: self.known_axis,

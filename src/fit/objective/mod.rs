@@ -28,11 +28,11 @@
 //! for A (differences of its grid); the Hessian is the BHHH outer product of the points'
 //! scores.
 
-mod normaliser;
+pub mod normaliser;
 mod refine;
 pub mod tables;
 
-pub use refine::{Limits, Refined, STOP_DECREASE, refine, value};
+pub use refine::{Limits, Refined, STOP_DECREASE, refine, refine_on, value, value_on};
 
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};
@@ -51,6 +51,8 @@ pub type Matrix = SMatrix<f64, PARAMETERS, PARAMETERS>;
 /// Points meet the surface within this many sigmas; the kernel is shifted down by its
 /// value there so that it reaches zero continuously.
 pub const CUTOFF: f64 = 4.0;
+/// Points per work item of an evaluation.
+const CHUNK: usize = 64;
 
 /// The sensor seen from the model: where it was, and each point's range weight.
 #[derive(Clone, Debug)]
@@ -116,7 +118,17 @@ pub struct Objective<'a> {
     pub data: &'a Data<'a>,
     pub rotation0: DQuat,
     pub grid: Grid,
+    /// the normaliser's grid ([`normaliser::FINE`] or [`normaliser::COARSE`])
+    pub area_grid: (usize, usize),
+    /// with a sensor: which of the normaliser's cells it sees, held ([`Objective::hold`])
+    pub visible: Option<Vec<bool>>,
 }
+
+pub static EVALS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+pub static GRADS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+pub static POINTS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+pub static PAIRS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+pub static HITS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// One point's sums over its window: the kernel sum and its partials.
 #[derive(Default)]
@@ -136,6 +148,25 @@ impl<'a> Objective<'a> {
             data,
             rotation0: candidate.pose.rotation,
             grid: Grid::for_shape(&candidate.shape, sigma),
+            area_grid: normaliser::FINE,
+            visible: None,
+        }
+    }
+
+    /// Finds which cells the sensor sees at `x` and holds it for the evaluations after.
+    pub fn hold(&mut self, x: &Vector) {
+        self.visible = None;
+        if let Some(sensor) = self.data.sensor {
+            let n = normaliser::normaliser(
+                &Self::shape(x),
+                self.rotation(x),
+                DVec3::new(x[6], x[7], x[8]),
+                Some((sensor.viewpoint, sensor.reference)),
+                self.area_grid,
+                None,
+                false,
+            );
+            self.visible = n.visible;
         }
     }
 
@@ -157,6 +188,9 @@ impl<'a> Objective<'a> {
     /// The mean negative log-likelihood per point; with `with_gradient` also its
     /// gradient and the BHHH approximation of its Hessian.
     pub fn evaluate(&self, x: &Vector, with_gradient: bool) -> (f64, Vector, Matrix) {
+        EVALS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        if with_gradient { GRADS.fetch_add(1, std::sync::atomic::Ordering::Relaxed); }
+        POINTS.fetch_add(self.data.points.len(), std::sync::atomic::Ordering::Relaxed);
         let shape = Self::shape(x);
         let sigma = x[12].exp();
         let rotation = self.rotation(x);
@@ -167,6 +201,8 @@ impl<'a> Objective<'a> {
             rotation,
             translation,
             sensor.map(|s| (s.viewpoint, s.reference)),
+            self.area_grid,
+            self.visible.as_deref(),
             with_gradient,
         );
         let window = Window::new(&self.grid, &shape, sigma, &normaliser);
@@ -207,22 +243,29 @@ impl<'a> Objective<'a> {
         };
         let n = self.data.points.len() as f64;
         let zero = || (0.0, Vector::zeros(), Matrix::zeros());
-        let (log_likelihood, gradient, outer) = self
+        // fixed chunks summed in order: the same sums whatever the threads' schedule, so a
+        // seed always gives the same fit
+        let partials: Vec<(f64, Vector, Matrix)> = self
             .data
             .points
-            .par_iter()
+            .par_chunks(CHUNK)
             .enumerate()
-            .with_min_len(64)
-            .fold(zero, |mut acc, (i, p)| {
-                let (l, g) = point_term(i, *p);
-                acc.0 += l;
-                if with_gradient {
-                    acc.1 += g;
-                    acc.2 += g * g.transpose();
+            .map(|(c, chunk)| {
+                let mut acc = zero();
+                for (j, p) in chunk.iter().enumerate() {
+                    let (l, g) = point_term(c * CHUNK + j, *p);
+                    acc.0 += l;
+                    if with_gradient {
+                        acc.1 += g;
+                        acc.2 += g * g.transpose();
+                    }
                 }
                 acc
             })
-            .reduce(zero, |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
+            .collect();
+        let (log_likelihood, gradient, outer) = partials
+            .into_iter()
+            .fold(zero(), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
         (-log_likelihood / n, -gradient / n, outer / n)
     }
 }
@@ -237,7 +280,9 @@ struct Window<'a> {
     rings: Vec<usize>,
     sectors: Vec<usize>,
     /// per sweep sample: its polar angle in the canonical x-y plane (rising in [0, 2 pi))
+    /// and its distance from the axis
     polar: Vec<f64>,
+    radius: Vec<f64>,
     normaliser: &'a Normaliser,
     var: f64,
     cut: f64,
@@ -248,16 +293,18 @@ impl<'a> Window<'a> {
     fn new(grid: &Grid, shape: &Shape, sigma: f64, normaliser: &'a Normaliser) -> Self {
         let sweep = SweepTable::new(grid, shape.a1, shape.a2, shape.eps2);
         let sectors = (0..grid.sweep)
-            .map(|m| Normaliser::sector_of(m as f64 * sweep.step))
+            .map(|m| normaliser.sector_of(m as f64 * sweep.step))
             .collect();
         let polar = sweep
             .point
             .iter()
             .map(|[x, y]| y.atan2(*x).rem_euclid(TAU))
             .collect();
+        let radius = sweep.point.iter().map(|[x, y]| x.hypot(*y)).collect();
         Self {
             shape: *shape,
             polar,
+            radius,
             section: SectionTable::new(grid, shape.eps1),
             rings: grid
                 .section
@@ -324,6 +371,10 @@ impl<'a> Window<'a> {
             let polar = q.y.atan2(q.x).rem_euclid(TAU);
             self.sweep_range(polar - half, polar + half)
         };
+        // the radii of the window's sweep samples bound how near a node's sweep comes
+        let (r_lo, r_hi) = (0..span)
+            .map(|j| self.radius[(first + j) % count])
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), r| (lo.min(r), hi.max(r)));
         for k in 0..self.section.point.len() {
             let [c, w] = self.section.point[k];
             let lambda = a4 + c;
@@ -332,6 +383,10 @@ impl<'a> Window<'a> {
             }
             let dz = q.z - a3 * w;
             if dz * dz >= cut2 {
+                continue;
+            }
+            let gap = (lambda * r_lo - rho).max(rho - lambda * r_hi).max(0.0);
+            if gap * gap + dz * dz >= cut2 {
                 continue;
             }
             for j in 0..span {

@@ -2,8 +2,9 @@
 //! integral over the surface it sees of its density of points, cos(incidence) / range²
 //! (relative to a reference range). A is a sum over a coarse grid of the surface (its
 //! integrand is smooth), its derivatives by differences of that grid, the visibility (a
-//! z-buffer of the grid's mesh, `likelihood::visibility`) found once per evaluation and
-//! held for the differences. The per-point sums look the visibility up in the same grid,
+//! z-buffer of the grid's mesh, `likelihood::visibility`) found where the caller asks
+//! and otherwise held: a refinement holds it through each line search, so the function
+//! it minimises does not jump where a cell's visibility flips. The per-point sums look the visibility up in the same grid,
 //! so the density they integrate is the one A normalises.
 
 use super::tables::{section_range, unit_superellipse};
@@ -12,9 +13,10 @@ use crate::model::Shape;
 use glam::{DQuat, DVec3};
 use std::f64::consts::TAU;
 
-/// The normaliser's grid: rings along the section, sectors about the axis.
-pub const RINGS: usize = 48;
-pub const SECTORS: usize = 96;
+/// The normaliser's grids, rings along the section by sectors about the axis: the one a
+/// refinement differentiates, and the coarser one that ranks candidates.
+pub const FINE: (usize, usize) = (48, 96);
+pub const COARSE: (usize, usize) = (24, 48);
 
 /// A and d ln A / d(shape, translation, turn), and which cells the sensor sees.
 pub struct Normaliser {
@@ -24,95 +26,134 @@ pub struct Normaliser {
     pub visible: Option<Vec<bool>>,
     /// the section's polar range the rings divide
     pub range: (f64, f64),
+    pub grid: (usize, usize),
 }
 
 impl Normaliser {
-    /// Whether the sensor sees the surface at section angle `phi` and sweep angle `psi`
-    /// (true without a sensor).
+    /// Whether the sensor sees the cell (true without a sensor).
     pub fn sees(&self, ring: usize, sector: usize) -> bool {
         self.visible
             .as_ref()
-            .is_none_or(|v| v[ring * SECTORS + sector])
+            .is_none_or(|v| v[ring * self.grid.1 + sector])
     }
 
     /// The ring holding section angle `phi`.
     pub fn ring_of(&self, phi: f64) -> usize {
         let (lo, hi) = self.range;
-        (((phi - lo) / (hi - lo) * RINGS as f64).floor() as isize).clamp(0, RINGS as isize - 1)
-            as usize
+        let rings = self.grid.0 as isize;
+        (((phi - lo) / (hi - lo) * rings as f64).floor() as isize).clamp(0, rings - 1) as usize
     }
 
     /// The sector holding sweep angle `psi` (in [0, 2 pi)).
-    pub fn sector_of(psi: f64) -> usize {
-        ((psi / TAU * SECTORS as f64).floor() as usize).min(SECTORS - 1)
+    pub fn sector_of(&self, psi: f64) -> usize {
+        ((psi / TAU * self.grid.1 as f64).floor() as usize).min(self.grid.1 - 1)
     }
 }
 
-/// The grid's cells (canonical): centres, areas, outward unit normals.
-pub fn cells(shape: &Shape) -> (Vec<DVec3>, Vec<f64>, Vec<DVec3>) {
-    let (lo, hi, _) = section_range(shape);
-    let section: Vec<(f64, f64)> = (0..=RINGS)
-        .map(|i| {
-            let (c, w, _, _) =
-                unit_superellipse(lo + (hi - lo) * i as f64 / RINGS as f64, shape.eps1);
-            (c, w)
-        })
-        .collect();
-    let top: Vec<(f64, f64)> = (0..=SECTORS)
-        .map(|j| {
-            let (x, y, _, _) = unit_superellipse(TAU * j as f64 / SECTORS as f64, shape.eps2);
-            (x, y)
-        })
-        .collect();
-    let corner = |i: usize, j: usize| {
-        let (c, z) = section[i];
-        let (x, y) = top[j];
-        let r = (shape.a4 + c).max(0.0);
-        DVec3::new(shape.a1 * r * x, shape.a2 * r * y, shape.a3 * z)
-    };
-    let mut centres = Vec::with_capacity(RINGS * SECTORS);
-    let mut areas = Vec::with_capacity(RINGS * SECTORS);
-    let mut normals = Vec::with_capacity(RINGS * SECTORS);
-    for i in 0..RINGS {
-        for j in 0..SECTORS {
-            let (c00, c10) = (corner(i, j), corner(i + 1, j));
-            let (c01, c11) = (corner(i, j + 1), corner(i + 1, j + 1));
-            centres.push((c00 + c10 + c01 + c11) * 0.25);
-            // (the section runs anticlockwise in (radius, z), the sweep anticlockwise
-            // about z: this cross product points outwards)
-            let normal = (c11 - c00).cross(c10 - c01);
-            areas.push(0.5 * normal.length());
-            normals.push(normal.normalize_or_zero());
+/// The unit curves of a grid: the section's points (c, w) and the top view's (x, y) at
+/// the rings' and sectors' polar angles.
+struct UnitCurves {
+    section: Vec<(f64, f64)>,
+    top: Vec<(f64, f64)>,
+}
+
+impl UnitCurves {
+    fn new(shape: &Shape, (rings, sectors): (usize, usize)) -> Self {
+        let (lo, hi, _) = section_range(shape);
+        Self {
+            section: (0..=rings)
+                .map(|i| {
+                    let phi = lo + (hi - lo) * i as f64 / rings as f64;
+                    let (c, w, _, _) = unit_superellipse(phi, shape.eps1);
+                    (c, w)
+                })
+                .collect(),
+            top: (0..=sectors)
+                .map(|j| {
+                    let (x, y, _, _) =
+                        unit_superellipse(TAU * j as f64 / sectors as f64, shape.eps2);
+                    (x, y)
+                })
+                .collect(),
         }
     }
-    (centres, areas, normals)
 }
 
-/// The normaliser at a shape and pose, seen from `sensor` (viewpoint, reference squared
-/// range) if any; derivatives with `with_gradient`.
+/// A grid's cells (canonical): centres, areas, outward unit normals.
+struct Cells {
+    centres: Vec<DVec3>,
+    areas: Vec<f64>,
+    normals: Vec<DVec3>,
+}
+
+impl Cells {
+    fn new(shape: &Shape, unit: &UnitCurves) -> Self {
+        let (rings, sectors) = (unit.section.len() - 1, unit.top.len() - 1);
+        let corner = |i: usize, j: usize| {
+            let (c, z) = unit.section[i];
+            let (x, y) = unit.top[j];
+            let r = (shape.a4 + c).max(0.0);
+            DVec3::new(shape.a1 * r * x, shape.a2 * r * y, shape.a3 * z)
+        };
+        let mut cells = Self {
+            centres: Vec::with_capacity(rings * sectors),
+            areas: Vec::with_capacity(rings * sectors),
+            normals: Vec::with_capacity(rings * sectors),
+        };
+        let mut previous: Vec<DVec3> = (0..=sectors).map(|j| corner(0, j)).collect();
+        for i in 0..rings {
+            let next: Vec<DVec3> = (0..=sectors).map(|j| corner(i + 1, j)).collect();
+            for j in 0..sectors {
+                let (c00, c10) = (previous[j], next[j]);
+                let (c01, c11) = (previous[j + 1], next[j + 1]);
+                cells.centres.push((c00 + c10 + c01 + c11) * 0.25);
+                // (the section runs anticlockwise in (radius, z), the sweep anticlockwise
+                // about z: this cross product points outwards)
+                let normal = (c11 - c00).cross(c10 - c01);
+                cells.areas.push(0.5 * normal.length());
+                cells.normals.push(normal.normalize_or_zero());
+            }
+            previous = next;
+        }
+        cells
+    }
+}
+
+/// The normaliser at a shape and pose on a `grid`, seen from `sensor` (viewpoint,
+/// reference squared range) if any; derivatives with `with_gradient`.
 pub fn normaliser(
     shape: &Shape,
     rotation: DQuat,
     translation: DVec3,
     sensor: Option<(DVec3, f64)>,
+    grid: (usize, usize),
+    held: Option<&[bool]>,
     with_gradient: bool,
 ) -> Normaliser {
     let (lo, hi, _) = section_range(shape);
-    let (cells, areas, normals) = cells(shape);
-    let moved_shape = |k: usize| {
-        let mut moved = shape.to_array();
-        let step = 1e-6 * moved[k].abs().max(1e-2);
-        moved[k] += step;
-        (Shape::from_array(moved), step)
+    let unit = UnitCurves::new(shape, grid);
+    let cells = Cells::new(shape, &unit);
+    // the cells with shape parameter k moved by a small step (the unit curves kept for
+    // the sizes, made again for the exponents)
+    let moved = |k: usize| {
+        let mut v = shape.to_array();
+        let step = 1e-6 * v[k].abs().max(1e-2);
+        v[k] += step;
+        let moved = Shape::from_array(v);
+        let cells = if k < 4 {
+            Cells::new(&moved, &unit)
+        } else {
+            Cells::new(&moved, &UnitCurves::new(&moved, grid))
+        };
+        (cells, step)
     };
     let Some((viewpoint, reference)) = sensor else {
-        let area: f64 = areas.iter().sum();
+        let area: f64 = cells.areas.iter().sum();
         let mut d_log_area = [0.0; 12];
         if with_gradient {
             for (k, d) in d_log_area.iter_mut().enumerate().take(6) {
-                let (moved, step) = moved_shape(k);
-                let (_, moved_areas, _) = self::cells(&moved);
-                *d = (moved_areas.iter().sum::<f64>() / area - 1.0) / step;
+                let (moved, step) = moved(k);
+                *d = (moved.areas.iter().sum::<f64>() / area - 1.0) / step;
             }
         }
         return Normaliser {
@@ -120,26 +161,27 @@ pub fn normaliser(
             d_log_area,
             visible: None,
             range: (lo, hi),
+            grid,
         };
     };
-    let world = |cells: &[DVec3], rotation: DQuat, translation: DVec3| -> Vec<DVec3> {
-        cells.iter().map(|c| rotation * *c + translation).collect()
+    let world = |cells: &Cells, rotation: DQuat, translation: DVec3| -> (Vec<DVec3>, Vec<DVec3>) {
+        (
+            cells
+                .centres
+                .iter()
+                .map(|c| rotation * *c + translation)
+                .collect(),
+            cells.normals.iter().map(|n| rotation * *n).collect(),
+        )
     };
-    let turn = |normals: &[DVec3], rotation: DQuat| -> Vec<DVec3> {
-        normals.iter().map(|n| rotation * *n).collect()
+    let (world_cells, world_normals) = world(&cells, rotation, translation);
+    let visible: Vec<bool> = match held {
+        Some(held) if held.len() == cells.areas.len() => held.to_vec(),
+        _ => View::new(&world_cells, &cells.areas, &world_normals, grid, viewpoint).visible,
     };
-    let world_cells = world(&cells, rotation, translation);
-    let world_normals = turn(&normals, rotation);
-    let view = View::new(
-        &world_cells,
-        &areas,
-        &world_normals,
-        (RINGS, SECTORS),
-        viewpoint,
-    );
     let density = |areas: &[f64], cells: &[DVec3], normals: &[DVec3]| -> f64 {
         (0..cells.len())
-            .filter(|&j| view.visible[j])
+            .filter(|&j| visible[j])
             .map(|j| {
                 let q = cells[j] - viewpoint;
                 let range2 = q.length_squared();
@@ -148,41 +190,32 @@ pub fn normaliser(
             })
             .sum()
     };
-    let area = density(&areas, &world_cells, &world_normals).max(1e-300);
+    let area = density(&cells.areas, &world_cells, &world_normals).max(1e-300);
     let mut d_log_area = [0.0; 12];
     if with_gradient {
         for (k, d) in d_log_area.iter_mut().enumerate().take(6) {
-            let (moved, step) = moved_shape(k);
-            let (c2, a2, n2) = self::cells(&moved);
-            *d = (density(
-                &a2,
-                &world(&c2, rotation, translation),
-                &turn(&n2, rotation),
-            ) / area
-                - 1.0)
-                / step;
+            let (moved, step) = moved(k);
+            let (c2, n2) = world(&moved, rotation, translation);
+            *d = (density(&moved.areas, &c2, &n2) / area - 1.0) / step;
         }
         let step = 1e-6;
         for k in 0..3 {
             let mut shift = DVec3::ZERO;
             shift[k] = step;
-            let shifted = world(&cells, rotation, translation + shift);
-            d_log_area[6 + k] = (density(&areas, &shifted, &world_normals) / area - 1.0) / step;
+            let shifted: Vec<DVec3> = world_cells.iter().map(|c| *c + shift).collect();
+            d_log_area[6 + k] =
+                (density(&cells.areas, &shifted, &world_normals) / area - 1.0) / step;
             // a turn on the left about world axis k (the turn parameters' convention)
             let turned = DQuat::from_scaled_axis(shift) * rotation;
-            d_log_area[9 + k] = (density(
-                &areas,
-                &world(&cells, turned, translation),
-                &turn(&normals, turned),
-            ) / area
-                - 1.0)
-                / step;
+            let (c2, n2) = world(&cells, turned, translation);
+            d_log_area[9 + k] = (density(&cells.areas, &c2, &n2) / area - 1.0) / step;
         }
     }
     Normaliser {
         area,
         d_log_area,
-        visible: Some(view.visible),
+        visible: Some(visible),
         range: (lo, hi),
+        grid,
     }
 }

@@ -28,7 +28,7 @@ pub struct Refined {
 }
 
 /// Two steps in a row that lower the objective by less than this end the refinement.
-pub const STOP_DECREASE: f64 = 2e-5;
+pub const STOP_DECREASE: f64 = 1e-4;
 
 /// Maximises the likelihood from `start` and `sigma` by Levenberg-Marquardt on the BHHH
 /// Hessian, at most `max_iterations` steps.
@@ -39,18 +39,42 @@ pub fn refine(
     limits: &Limits,
     max_iterations: usize,
 ) -> Refined {
-    let mut objective = Objective::new(data, start, sigma);
+    refine_on(data, start, sigma, limits, max_iterations, super::normaliser::FINE)
+}
+
+/// [`refine`] with the normaliser on `area_grid` ([`super::normaliser::COARSE`]: a
+/// quarter of its cost, for a few steps that rank candidates).
+pub fn refine_on(
+    data: &Data,
+    start: &Candidate,
+    sigma: f64,
+    limits: &Limits,
+    max_iterations: usize,
+    area_grid: (usize, usize),
+) -> Refined {
+    let mut objective = Objective {
+        area_grid,
+        ..Objective::new(data, start, sigma)
+    };
     let mut x = parameters(start, sigma);
+    objective.hold(&x);
     let axis = start.pose.axis();
     let mut free = [true; PARAMETERS];
     for k in 0..6 {
         free[k] = !limits.fixed_shape[k];
     }
     let b = &limits.bounds;
-    let feasible = |x: &Vector| {
-        (0..6).all(|k| x[k] > b.lower[k] && x[k] < b.upper[k])
-            && x[12] > (1e-3 * sigma).ln()
-            && x[12] < (1e2 * sigma).ln()
+    // the step is projected into the box (the topology held too: a hole, a4 > 1, or
+    // none, the section closing on the axis, whose quadrature is another)
+    let holed = start.shape.a4 > 1.0;
+    let project = |mut x: Vector| {
+        for k in 0..6 {
+            let margin = 1e-3 * (b.upper[k] - b.lower[k]);
+            x[k] = x[k].clamp(b.lower[k] + margin.min(0.5 * b.lower[k].max(1e-9)), b.upper[k] - margin);
+        }
+        x[3] = if holed { x[3].max(1.01) } else { x[3].min(0.99) };
+        x[12] = x[12].clamp((1e-3 * sigma).ln(), (1e2 * sigma).ln());
+        x
     };
     // with a known axis the turn is theta about it alone
     let reduction = limits.fixed_axis.then(|| {
@@ -88,12 +112,12 @@ pub fn refine(
         let Some(step) = solve_step(&g, &h, lambda) else {
             break;
         };
-        let trial = x + step;
-        let f_trial = if feasible(&trial) {
-            objective.evaluate(&trial, false).0
-        } else {
-            f64::INFINITY
-        };
+        let trial = project(x + step);
+        let step = trial - x;
+        let f_trial = objective.evaluate(&trial, false).0;
+        if std::env::var("DEBUG_REFINE").is_ok() {
+            eprintln!("    it {iterations} f {f:.6} trial {f_trial:.6} lambda {lambda:.1e} step {:.2e} sigma {:.4}", step.norm(), x[12].exp());
+        }
         if f_trial < f {
             let decrease = f - f_trial;
             x = trial;
@@ -102,6 +126,7 @@ pub fn refine(
             x[10] = 0.0;
             x[11] = 0.0;
             objective.grid = Grid::for_shape(&Objective::shape(&x), x[12].exp());
+            objective.hold(&x);
             (f, g, h) = objective.evaluate(&x, true);
             lambda = (lambda / 3.0).max(1e-9);
             small_steps = if decrease < STOP_DECREASE {
@@ -127,9 +152,19 @@ pub fn refine(
     }
 }
 
-/// The objective at a candidate and sigma, without a gradient.
+/// The objective at a candidate and sigma, without a gradient, its normaliser on the
+/// fine grid (as [`refine`] reports it).
 pub fn value(data: &Data, candidate: &Candidate, sigma: f64) -> f64 {
-    let objective = Objective::new(data, candidate, sigma);
+    value_on(data, candidate, sigma, super::normaliser::FINE)
+}
+
+/// [`value`] with the normaliser on `area_grid` ([`super::normaliser::COARSE`] ranks
+/// candidates at a quarter of the cost).
+pub fn value_on(data: &Data, candidate: &Candidate, sigma: f64, area_grid: (usize, usize)) -> f64 {
+    let objective = Objective {
+        area_grid,
+        ..Objective::new(data, candidate, sigma)
+    };
     objective.evaluate(&parameters(candidate, sigma), false).0
 }
 

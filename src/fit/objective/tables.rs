@@ -85,7 +85,7 @@ pub struct Grid {
 
 impl Grid {
     pub fn for_shape(shape: &Shape, sigma: f64) -> Self {
-        const FINE: usize = 2048;
+        const FINE: usize = 512;
         let (lo, hi, closed) = section_range(shape);
         let across = (shape.a1 * shape.a2).sqrt();
         let at = |i: usize| lo + (hi - lo) * i as f64 / FINE as f64;

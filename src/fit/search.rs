@@ -1,0 +1,568 @@
+//! One bounded search for each cloud of a group, all clouds in lockstep: the broad start
+//! set goes through least squares in rounds on growing samples, cut down between rounds
+//! by the likelihood of the cloud ([`super::objective`]); the finalists are refined by
+//! the estimator their noise calls for and the most likely stands.
+//!
+//! 1. Round 1: every start ([`super::prepare`]), least squares (Huber loss, free space)
+//!    for [`ROUND1_ITERATIONS`] on the stage-1 sample; the [`ROUND1_KEPT`] most likely in
+//!    distinct basins go on.
+//! 2. Round 2: those on the stage-2 sample, each in the box its cloud supports, to
+//!    convergence; the [`FINALISTS`] most likely in distinct basins, and the other reading
+//!    of the best one's top view ([`starts::turned_dual`]), are the finalists.
+//! 3. Each finalist is refined: by the likelihood where the noise biases least squares
+//!    ([`noisy`]), by least squares under a Cauchy loss otherwise; the most likely
+//!    finalist is the fit (on a precise cloud, the one closest to its points).
+//!
+//! Least squares does the broad work because it is cheap and batched on the evaluator;
+//! the likelihood judges, because it is the one measure that sees what least squares
+//! does not: a surface shown to the sensor without points on it, noise that blurs a thin
+//! section, outliers.
+
+use super::*;
+use crate::eval::Normalization;
+use crate::fit::objective::{self, Data, Sensor};
+
+/// Least-squares iterations of round 1 (starts a few iterations apart have found their
+/// basins; the rest is round 2's).
+pub const ROUND1_ITERATIONS: usize = 10;
+/// Candidates round 1 keeps, in distinct basins.
+pub const ROUND1_KEPT: usize = 4;
+/// Finalists round 2 keeps, in distinct basins (the other reading of the best one's top
+/// view joins them).
+pub const FINALISTS: usize = 2;
+/// A cloud searched both as a view and as a view from nowhere goes on in only one
+/// reading where that reading's best round-2 candidate is more likely than the other's
+/// by this much (mean log-likelihood per point; a view's points spread all round lose
+/// about ln 2 = 0.69 each).
+pub const TWIN_MARGIN: f64 = 0.2;
+/// The smallest noise sigma the likelihood is evaluated at (normalised units: the cloud's
+/// RMS radius is 1). Below it the fit is precise: least squares is the likelihood's own
+/// limit there, and finalists are told apart by their distance to the points.
+pub const SIGMA_FLOOR: f64 = 1e-2;
+/// The smallest noise sigma a likelihood refinement starts from (normalised units).
+pub const REFINE_SIGMA_FLOOR: f64 = 2e-3;
+/// Likelihood iterations of the chosen finalist's refinement.
+pub const REFINE_ITERATIONS: usize = 30;
+/// Likelihood iterations and points each round-2 candidate gets before the choice.
+pub const ROUND2_ITERATIONS: usize = 5;
+pub const ROUND2_POINTS: usize = 400;
+/// A round-2 candidate within this of the best (mean log-likelihood per point) converges
+/// beside it before the choice.
+pub const CLOSE_MARGIN: f64 = 0.05;
+/// The most points of the cloud the chosen finalist's likelihood refinement ends on, and
+/// its iterations there.
+pub const FINAL_POINTS: usize = 3000;
+pub const FINAL_ITERATIONS: usize = 30;
+
+/// A cloud's sample as the likelihood sees it.
+pub(super) struct Sample {
+    points: Vec<DVec3>,
+    sensor: Option<Sensor>,
+    outlier_density: f64,
+}
+
+impl Sample {
+    pub(super) fn new(points: &[DVec3], viewpoint: Option<DVec3>) -> Self {
+        let volume = likelihood::outlier_volume(points, SIGMA_FLOOR);
+        Self {
+            points: points.to_vec(),
+            sensor: viewpoint.map(|v| Sensor::new(points, v)),
+            outlier_density: LIKELIHOOD_OUTLIER_WEIGHT / volume,
+        }
+    }
+
+    fn data(&self) -> Data<'_> {
+        Data {
+            points: &self.points,
+            outlier_weight: LIKELIHOOD_OUTLIER_WEIGHT,
+            outlier_density: self.outlier_density,
+            sensor: self.sensor.as_ref(),
+        }
+    }
+
+    /// The negative mean log-likelihood of a candidate at noise `sigma`. Below
+    /// [`SIGMA_FLOOR`] it is taken at the floor and continued as its thin-noise limit,
+    /// where points on the surface are as dense as 1/sigma across it: a fit that lies
+    /// ten times closer to its points is ln 10 more likely per point.
+    pub(super) fn score(&self, candidate: &Candidate, sigma: f64) -> f64 {
+        self.score_on(candidate, sigma, objective::normaliser::COARSE)
+    }
+
+    /// [`Sample::score`] with the normaliser on the grid refinements use.
+    pub(super) fn score_finely(&self, candidate: &Candidate, sigma: f64) -> f64 {
+        self.score_on(candidate, sigma, objective::normaliser::FINE)
+    }
+
+    fn score_on(&self, candidate: &Candidate, sigma: f64, grid: (usize, usize)) -> f64 {
+        let at_floor =
+            objective::value_on(&self.data(), candidate, sigma.max(SIGMA_FLOOR), grid);
+        at_floor - (SIGMA_FLOOR / sigma.max(1e-9)).ln().max(0.0)
+    }
+}
+
+/// A candidate as the search holds it: where it is, its noise and how likely it is.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Scored {
+    pub candidate: Candidate,
+    /// the robust scale of its residuals (normalised units)
+    pub sigma: f64,
+    /// negative mean log-likelihood (lower is better)
+    pub score: f64,
+    /// least-squares cost on its sample (what tells precise fits apart)
+    pub cost: f64,
+    pub iterations: usize,
+    /// the likelihood refined it
+    pub modelled: bool,
+}
+
+/// Whether a fit with noise `sigma` (normalised) is noisy enough for least squares to be
+/// biased, so that the likelihood refines it: [`LIKELIHOOD_VIEW_NOISE_RATIO`] of its
+/// thinnest half-axis with a viewpoint; without one [`LIKELIHOOD_NOISE_RATIO`], and only
+/// where the points cover the surface all round ([`LIKELIHOOD_MIN_COVERAGE`]: a
+/// one-sided cloud from nowhere would have its unseen side shrunk).
+pub(super) fn noisy(p: &Prepared, c: &Candidate, sigma: f64) -> bool {
+    if !p.noise_model {
+        return false;
+    }
+    let thinnest = c.shape.thinnest_half_axis();
+    match p.viewpoint {
+        Some(_) => sigma >= LIKELIHOOD_VIEW_NOISE_RATIO * thinnest,
+        None => {
+            sigma >= LIKELIHOOD_NOISE_RATIO * thinnest
+                && c.shape.a4 > 1.0
+                && likelihood::surface_coverage(&p.stage2_pts, c, sigma) >= LIKELIHOOD_MIN_COVERAGE
+        }
+    }
+}
+
+/// 1.4826 · the median |residual|: the noise a candidate reads off its points.
+fn robust_scale(residuals: &[f64]) -> f64 {
+    let mut magnitudes: Vec<f64> = residuals.iter().map(|r| r.abs()).collect();
+    1.4826 * report::median(&mut magnitudes)
+}
+
+/// The likelihood of each solution on its cloud's sample: (candidate, scale, score),
+/// residuals from the evaluator's current point sets.
+fn scored(
+    evaluator: &mut dyn Evaluator,
+    solutions: &[Solution],
+    sets: &[usize],
+    samples: &[&Sample],
+) -> Result<Vec<Scored>, FitError> {
+    let candidates: Vec<Candidate> = solutions.iter().map(|s| s.candidate).collect();
+    let residuals = evaluator.residuals_on(&candidates, sets)?;
+    let mut offset = 0;
+    let mut out = Vec::with_capacity(solutions.len());
+    for (solution, &set) in solutions.iter().zip(sets) {
+        let n = samples[set].points.len();
+        let sigma = robust_scale(&residuals[offset..offset + n]);
+        offset += n;
+        out.push(Scored {
+            candidate: solution.candidate,
+            sigma,
+            score: samples[set].score(&solution.candidate, sigma),
+            cost: solution.cost,
+            iterations: solution.iterations,
+            modelled: false,
+        });
+    }
+    Ok(out)
+}
+
+/// The best `keep` of one cloud's candidates in distinct basins, most likely first.
+fn most_likely_distinct(mut candidates: Vec<Scored>, keep: usize) -> Vec<Scored> {
+    candidates.sort_by(|a, b| a.score.total_cmp(&b.score));
+    let mut kept: Vec<Scored> = Vec::new();
+    for c in candidates {
+        if kept.len() == keep {
+            break;
+        }
+        if kept
+            .iter()
+            .all(|k| distinct_basin(&k.candidate, &c.candidate))
+        {
+            kept.push(c);
+        }
+    }
+    kept
+}
+
+/// What the search found for one cloud: the fit, and the work it took.
+pub(super) struct Found {
+    pub best: Scored,
+    pub stage1_iterations: usize,
+    /// candidates tried: starts, round-2 candidates, finalists
+    pub tried: [usize; 3],
+    pub round1_ms: f64,
+    pub round2_ms: f64,
+    pub finalists_ms: f64,
+    /// its twin's reading was plainly more likely: it went no further than round 2
+    pub dropped: bool,
+}
+
+/// The search for every cloud of a group (clouds with one solver setting).
+pub(super) fn search_group(
+    evaluator: &mut dyn Evaluator,
+    group: &[(usize, Prepared)],
+    twins: &[(usize, usize)],
+) -> Result<Vec<Found>, FitError> {
+    let t0 = Instant::now();
+    let (opts1, opts2) = (group[0].1.opts1, group[0].1.opts2);
+    let bounds = group[0].1.bounds;
+    let samples1: Vec<Sample> = group
+        .iter()
+        .map(|(_, p)| Sample::new(&p.stage1_pts, p.viewpoint))
+        .collect();
+    let samples2: Vec<Sample> = group
+        .iter()
+        .map(|(_, p)| Sample::new(&p.stage2_pts, p.viewpoint))
+        .collect();
+
+    // Round 1: every start on the stage-1 sample.
+    let sets1: Vec<PointSet> = group.iter().map(|(_, p)| p.stage1_set()).collect();
+    evaluator.set_point_sets_with_free_space(&sets1)?;
+    let (starts, sets) = flatten(group.iter().map(|(_, p)| p.starts.clone()));
+    // (no pruning by cost: the likelihood does the cutting)
+    let round1_options = SolverOptions {
+        max_iterations: ROUND1_ITERATIONS,
+        prune_after: 0,
+        ..opts1
+    };
+    let round1 = solve_on(
+        evaluator,
+        &starts,
+        &sets,
+        &vec![bounds; starts.len()],
+        &round1_options,
+    )?;
+    // (a start merged into another reports that one's solution: one of them is enough)
+    let live: Vec<(Solution, usize)> = round1
+        .into_iter()
+        .zip(sets)
+        .filter(|(s, _)| !matches!(s.stop, Stop::Merged | Stop::Pruned))
+        .collect();
+    let (live, live_sets): (Vec<Solution>, Vec<usize>) = live.into_iter().unzip();
+    let sample_refs: Vec<&Sample> = samples1.iter().collect();
+    let ts = Instant::now();
+    let scored1 = scored(evaluator, &live, &live_sets, &sample_refs)?;
+    if std::env::var("DEBUG_TIME").is_ok() {
+        eprintln!("round1 ls {:.1} ms, scoring {} candidates {:.1} ms", (ts - t0).as_secs_f64() * 1e3, live.len(), ts.elapsed().as_secs_f64() * 1e3);
+    }
+    let stage1_iterations: Vec<usize> = (0..group.len())
+        .map(|cloud| {
+            live.iter()
+                .zip(&live_sets)
+                .filter(|(_, s)| **s == cloud)
+                .map(|(s, _)| s.iterations)
+                .max()
+                .unwrap_or(0)
+        })
+        .collect();
+    let kept1: Vec<Vec<Scored>> = (0..group.len())
+        .map(|cloud| {
+            let own: Vec<Scored> = scored1
+                .iter()
+                .zip(&live_sets)
+                .filter(|(_, s)| **s == cloud)
+                .map(|(c, _)| *c)
+                .collect();
+            most_likely_distinct(own, ROUND1_KEPT)
+        })
+        .collect();
+    let t1 = t0.elapsed();
+    if std::env::var("DEBUG_SEARCH").is_ok() {
+        for (c, s) in scored1.iter().zip(&live_sets) {
+            eprintln!("r1 cloud {s} score {:.4} sigma {:.4} cost {:.4} axis {:.3?} shape {:.3?}", c.score, c.sigma, c.cost, c.candidate.pose.axis(), c.candidate.shape.to_array());
+        }
+        eprintln!("starts {}", starts.len());
+    }
+
+    // Round 2: the kept candidates, and the other reading of the best one's top view,
+    // refined by the estimator the cloud's noise calls for, on the round-2 sample.
+    let sets2: Vec<PointSet> = group.iter().map(|(_, p)| p.stage2_set()).collect();
+    evaluator.set_point_sets_with_free_space(&sets2)?;
+    let mut round2: Vec<Vec<Scored>> = Vec::with_capacity(group.len());
+    for (cloud, (_, p)) in group.iter().enumerate() {
+        let mid: Vec<DVec3> = p
+            .stage2_pts
+            .iter()
+            .step_by(p.stage2_pts.len().div_ceil(ROUND2_POINTS).max(1))
+            .copied()
+            .collect();
+        let mid = Sample::new(&mid, p.viewpoint);
+        let mut candidates = kept1[cloud].clone();
+        let readings = candidates.len();
+        if let Some(best) = candidates.first()
+            && let Some(dual) = p.turned_dual(&best.candidate)
+        {
+            candidates.push(Scored {
+                candidate: dual,
+                ..*best
+            });
+        }
+        // (one estimator for all of a cloud's candidates, chosen on its most likely one:
+        // candidates are compared by one measure)
+        let noise = p.scatter().unwrap_or(candidates[0].sigma);
+        let modelled = noisy(p, &candidates[0].candidate, noise);
+        let mut refined = Vec::with_capacity(candidates.len());
+        for (k, c) in candidates.into_iter().enumerate() {
+            refined.push(refine_candidate(
+                evaluator,
+                p,
+                &mid,
+                cloud,
+                c,
+                k >= readings,
+                modelled.then_some(noise),
+            )?);
+        }
+        if std::env::var("DEBUG_SEARCH").is_ok() {
+            for c in &refined {
+                eprintln!("r2 cloud {cloud} score {:.4} sigma {:.4} modelled {} axis {:.3?} shape {:.3?}", c.score, c.sigma, c.modelled, c.candidate.pose.axis(), c.candidate.shape.to_array());
+            }
+        }
+        round2.push(refined);
+    }
+    let t2 = t0.elapsed();
+
+    // Twins (one cloud read as a view and as a view from nowhere): the reading whose best
+    // candidate is plainly less likely than the other's goes no further.
+    let best2: Vec<Scored> = round2.iter().map(|r| choose(r)).collect();
+    let mut dropped = vec![false; group.len()];
+    for &(a, b) in twins {
+        if best2[a].score + TWIN_MARGIN < best2[b].score {
+            dropped[b] = true;
+        } else if best2[b].score + TWIN_MARGIN < best2[a].score {
+            dropped[a] = true;
+        }
+    }
+
+    // The most likely candidate converges: on the stage-2 sample, then a few steps on
+    // more of the cloud's points (from near the optimum they converge at once, and the
+    // estimate's variance falls with the points).
+    let mut found = Vec::with_capacity(group.len());
+    for (cloud, (_, p)) in group.iter().enumerate() {
+        let mut best = best2[cloud];
+        if best.modelled && !dropped[cloud] {
+            // (a runner-up about as likely on the round-2 sample converges too, and the
+            // likelier of the two on the stage-2 sample stands: the two readings of a
+            // top view are often that close)
+            let mut close: Vec<Scored> = round2[cloud]
+                .iter()
+                .filter(|c| c.modelled && c.score <= best.score + CLOSE_MARGIN)
+                .copied()
+                .collect();
+            close.sort_by(|a, b| a.score.total_cmp(&b.score));
+            close.truncate(2);
+            best = close
+                .into_iter()
+                .map(|c| converge(p, &samples2[cloud], c, REFINE_ITERATIONS))
+                .min_by(|a, b| a.score.total_cmp(&b.score))
+                .unwrap_or(best);
+            // then a few steps on more of the cloud's points: from near the optimum they
+            // converge at once, and the estimate's variance falls with the points
+            let more: Vec<DVec3> = p
+                .points
+                .iter()
+                .step_by(p.points.len().div_ceil(FINAL_POINTS).max(1))
+                .map(|x| p.norm.point(*x))
+                .collect();
+            if more.len() > p.stage2_pts.len() && best.modelled {
+                best = converge(p, &Sample::new(&more, p.viewpoint), best, FINAL_ITERATIONS);
+            }
+        }
+        found.push(Found {
+            best,
+            stage1_iterations: stage1_iterations[cloud],
+            tried: [group[cloud].1.starts.len(), round2[cloud].len(), 1],
+            round1_ms: t1.as_secs_f64() * 1e3,
+            round2_ms: (t2 - t1).as_secs_f64() * 1e3,
+            finalists_ms: 0.0,
+            dropped: dropped[cloud],
+        });
+    }
+    let t3 = t0.elapsed();
+    for f in &mut found {
+        f.finalists_ms = (t3 - t2).as_secs_f64() * 1e3;
+    }
+    Ok(found)
+}
+
+/// The most likely of a cloud's refined finalists.
+fn choose(refined: &[Scored]) -> Scored {
+    *refined
+        .iter()
+        .min_by(|a, b| a.score.total_cmp(&b.score))
+        .expect("one finalist at least")
+}
+
+/// The likelihood's refinement of a finalist on `sample`, at most `iterations`; the
+/// finalist as it was where the refinement collapses.
+fn converge(p: &Prepared, sample: &Sample, best: Scored, iterations: usize) -> Scored {
+    let r = objective::refine(
+        &sample.data(),
+        &best.candidate,
+        best.sigma,
+        &p.objective_limits(&best.candidate),
+        iterations,
+    );
+    if collapsed(&r, best.sigma) {
+        return best;
+    }
+    Scored {
+        candidate: r.candidate,
+        sigma: r.sigma,
+        score: r.objective,
+        iterations: best.iterations + r.iterations,
+        ..best
+    }
+}
+
+/// A likelihood fit that explains the points only by blurring them far more than least
+/// squares found ([`MAX_SIGMA_GROWTH`]), or whose section is thinner than its blur
+/// ([`MIN_SECTION_SIGMAS`]), has collapsed: blur that wide hides any section.
+fn collapsed(r: &objective::Refined, sigma: f64) -> bool {
+    r.candidate.shape.thinnest_half_axis() < MIN_SECTION_SIGMAS * r.sigma
+        || r.sigma > MAX_SIGMA_GROWTH * sigma.max(REFINE_SIGMA_FLOOR)
+}
+
+/// One candidate refined by the estimator the cloud's noise calls for: with `noise` (the
+/// cloud's own scatter, where [`noisy`]) by the likelihood for [`ROUND2_ITERATIONS`] on
+/// `sample`; otherwise to convergence by least squares under a Cauchy loss (on the
+/// stage-2 set `set`, uploaded), scored on `sample`. The other reading of a top view
+/// gets least squares first in either case (it starts far from its optimum).
+fn refine_candidate(
+    evaluator: &mut dyn Evaluator,
+    p: &Prepared,
+    sample: &Sample,
+    set: usize,
+    c: Scored,
+    other_reading: bool,
+    noise: Option<f64>,
+) -> Result<Scored, FitError> {
+    let c = if noise.is_some() && !other_reading {
+        c
+    } else {
+        // (stage 2's least squares on its whole sample, then the robust rounds)
+        let bounds = p.supported_bounds(&c.candidate);
+        let solution = solve_on(evaluator, &[c.candidate], &[set], &[bounds], &p.opts2)?
+            .pop()
+            .expect("one solution per start");
+        let solution = Solution {
+            iterations: c.iterations + solution.iterations,
+            ..solution
+        };
+        let robust = robust_least_squares(evaluator, p, set, solution)?;
+        let sigma = robust_scale(&evaluator.residuals_on(&[robust.candidate], &[set])?);
+        Scored {
+            candidate: robust.candidate,
+            sigma,
+            score: sample.score(&robust.candidate, sigma),
+            cost: robust.cost,
+            iterations: robust.iterations,
+            modelled: false,
+        }
+    };
+    let Some(noise) = noise else {
+        return Ok(c);
+    };
+    let start = c.sigma.max(noise).max(REFINE_SIGMA_FLOOR);
+    let r = objective::refine_on(
+        &sample.data(),
+        &c.candidate,
+        start,
+        &p.objective_limits(&c.candidate),
+        ROUND2_ITERATIONS,
+        objective::normaliser::COARSE,
+    );
+    if collapsed(&r, start) {
+        return Ok(c);
+    }
+    Ok(Scored {
+        candidate: r.candidate,
+        sigma: r.sigma,
+        score: r.objective,
+        cost: c.cost,
+        iterations: c.iterations + r.iterations,
+        modelled: true,
+    })
+}
+
+/// A solution solved again under a Cauchy loss scaled by its own residuals' spread, in
+/// rounds at smaller scales while the residuals shrink (see [`refine_robustly`]).
+fn robust_least_squares(
+    evaluator: &mut dyn Evaluator,
+    p: &Prepared,
+    set: usize,
+    solution: Solution,
+) -> Result<Solution, FitError> {
+    let Some(k) = p.refine_scale.filter(|_| !p.skip.contains(&Stage::RobustRefine)) else {
+        return Ok(solution);
+    };
+    let mut median = {
+        let r = evaluator.residuals_on(&[solution.candidate], &[set])?;
+        robust_scale(&r) / 1.4826
+    };
+    let mut solution = solution;
+    for round in 0..ROBUST_ROUNDS {
+        let sigma = (1.4826 * median).max(1e-4);
+        let options = SolverOptions {
+            loss: Loss::Cauchy(k * sigma),
+            max_iterations: if round == 0 {
+                15
+            } else {
+                ROBUST_LATER_ITERATIONS
+            },
+            ..p.opts2
+        };
+        let bounds = p.supported_bounds(&solution.candidate);
+        let r = solve_on(evaluator, &[solution.candidate], &[set], &[bounds], &options)?
+            .pop()
+            .expect("one solution per start");
+        let next = robust_scale(&evaluator.residuals_on(&[r.candidate], &[set])?) / 1.4826;
+        if round > 0 && next >= median {
+            break;
+        }
+        solution = Solution {
+            iterations: solution.iterations + r.iterations,
+            ..r
+        };
+        if sigma <= 1e-4 || 1.4826 * next > ROBUST_SHRINK * sigma {
+            break;
+        }
+        median = next;
+    }
+    Ok(solution)
+}
+
+/// A cloud scored as a view from `viewpoint` and as an all-round cloud, on an even stride
+/// of its points: the stride and the normalisation it is scored in.
+pub(super) struct ViewTest {
+    norm: Normalization,
+    view: Sample,
+    all_round: Sample,
+}
+
+impl ViewTest {
+    pub(super) fn new(points: &[DVec3], viewpoint: DVec3, count: usize) -> Self {
+        let norm = Normalization::of(points);
+        let sample: Vec<DVec3> = points
+            .iter()
+            .step_by(points.len().div_ceil(count).max(1))
+            .map(|p| norm.point(*p))
+            .collect();
+        Self {
+            view: Sample::new(&sample, Some(norm.point(viewpoint))),
+            all_round: Sample::new(&sample, None),
+            norm,
+        }
+    }
+
+    /// The negative mean log-likelihood of a fit as a view (`true`) or all round.
+    pub(super) fn score(&self, r: &FitReport, as_view: bool) -> f64 {
+        let candidate = self.norm.candidate(&r.fitted.0, &r.fitted.1);
+        let sigma = r.quality.noise_sigma / self.norm.scale;
+        let sample = if as_view { &self.view } else { &self.all_round };
+        sample.score(&candidate, sigma)
+    }
+}
