@@ -1,6 +1,6 @@
 //! Development: fit suite cases as the bench presents them (camera frame, no options; or
 //! with GIVEN set, the camera's position given) and print truth, fit, errors and timing;
-//! with TRUTH set, the likelihood of the fit against the truth refined.
+//! with SEARCH set, by `Method::Search`; with TRUTH set, the likelihood of the fit against the truth refined.
 use supertoroid::bench::synthetic::{Presentation, category, presented};
 use supertoroid::eval::{CpuEvaluator, Normalization};
 use supertoroid::fit::ground_truth::{compare, make_case};
@@ -9,17 +9,46 @@ use supertoroid::model::Pose;
 use supertoroid::synth;
 
 fn main() {
-    let presentation = if std::env::var("GIVEN").is_ok() { Presentation::Viewpoint } else { Presentation::Camera };
+    let presentation = if std::env::var("GIVEN").is_ok() {
+        Presentation::Viewpoint
+    } else {
+        Presentation::Camera
+    };
     for seed in std::env::args().skip(1).map(|s| s.parse::<u64>().unwrap()) {
         let (partial, noise, outliers) = category((seed % 1000) as usize % 180);
         let case = make_case(seed, partial, noise, outliers);
         let (points, viewpoint, back) = presented(&case, presentation);
-        let options = FitOptions { seed, viewpoint, ..Default::default() };
+        let method = if std::env::var("SEARCH").is_ok() {
+            supertoroid::fit::Method::Search
+        } else {
+            Default::default()
+        };
+        let options = FitOptions {
+            seed,
+            viewpoint,
+            method,
+            ..Default::default()
+        };
         let r = fit(&mut CpuEvaluator::new(), &points, &options).unwrap();
         let f = r.fitted.1;
         let pose = Pose::new(back.rotation * f.rotation, back.to_world(f.translation));
         let e = compare((&case.shape, &case.pose), (&r.fitted.0, &pose));
-        println!("{seed} {} noise {noise} out {outliers}: success {} c {:.3} ax {:.2} sz {:.3} a4 {:.3} eps {:.3}\n  truth {:.4?}\n  fit   {:.4?}\n  viewpoint {:?}; {:.0} ms {:?} warnings {}", if partial {"partial"} else {"full"}, e.success(), e.centre, e.axis_degrees, e.sizes, e.a4, e.eps, case.shape.to_array(), r.fitted.0.to_array(), r.viewpoint.source, r.timing_ms.total, r.timing_ms, r.warnings.len());
+        println!(
+            "{seed} {} noise {noise} out {outliers}: success {} c {:.3} ax {:.2} sz {:.3} a4 {:.3} eps {:.3}\n  truth {:.4?}\n  fit   {:.4?}\n  viewpoint {:?}; {:.0} ms {:?} warnings {}",
+            if partial { "partial" } else { "full" },
+            e.success(),
+            e.centre,
+            e.axis_degrees,
+            e.sizes,
+            e.a4,
+            e.eps,
+            case.shape.to_array(),
+            r.fitted.0.to_array(),
+            r.viewpoint.source,
+            r.timing_ms.total,
+            r.timing_ms,
+            r.warnings.len()
+        );
         if std::env::var("TRUTH").is_ok() {
             // in the suite's frame
             let norm = Normalization::of(&case.points);
@@ -27,10 +56,24 @@ fn main() {
             let mut rng = synth::rng(seed);
             let _ = synth::subsample(&all, 150, &mut rng);
             let sample = synth::subsample(&all, 1000, &mut rng);
-            let v = if partial { case.viewpoint.map(|v| norm.point(v)) } else { None };
+            let v = if partial {
+                case.viewpoint.map(|v| norm.point(v))
+            } else {
+                None
+            };
             let sensor = v.map(|v| objective::Sensor::new(&sample, v));
-            let data = objective::Data { points: &sample, outlier_weight: LIKELIHOOD_OUTLIER_WEIGHT, outlier_density: LIKELIHOOD_OUTLIER_WEIGHT / likelihood::outlier_volume(&sample, 2e-3), sensor: sensor.as_ref() };
-            let limits = objective::Limits { bounds: options.bounds(), fixed_shape: [false; 6], fixed_axis: false };
+            let data = objective::Data {
+                points: &sample,
+                outlier_weight: LIKELIHOOD_OUTLIER_WEIGHT,
+                outlier_density: LIKELIHOOD_OUTLIER_WEIGHT
+                    / likelihood::outlier_volume(&sample, 2e-3),
+                sensor: sensor.as_ref(),
+            };
+            let limits = objective::Limits {
+                bounds: options.bounds(),
+                fixed_shape: [false; 6],
+                fixed_axis: false,
+            };
             let sigma = (case.noise * case.shape.size() / norm.scale).max(2e-3);
             let truth = norm.candidate(&case.shape, &case.pose);
             let t = objective::refine(&data, &truth, sigma, &limits, 60);
@@ -39,7 +82,13 @@ fn main() {
             let fr = objective::refine(&data, &fitted, fs, &limits, 60);
             let (ts, tp) = norm.to_world(&t.candidate);
             let te = compare((&case.shape, &case.pose), (&ts, &tp));
-            println!("  truth-refined {:.4} (success {}) fit-refined {:.4} at fit {:.4}", t.objective, te.success(), fr.objective, objective::value(&data, &fitted, fs));
+            println!(
+                "  truth-refined {:.4} (success {}) fit-refined {:.4} at fit {:.4}",
+                t.objective,
+                te.success(),
+                fr.objective,
+                objective::value(&data, &fitted, fs)
+            );
         }
     }
 }

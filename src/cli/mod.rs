@@ -111,7 +111,7 @@ pub struct BenchArgs {
     /// cases) into DIR, relative to --out unless absolute; the report embeds them
     #[arg(long, global = true)]
     pub render: Option<PathBuf>,
-    /// pipeline for the fits (paper, synthetic): default or paper
+    /// pipeline for the fits (paper, synthetic): default, search (one bounded search, measured against the default) or paper
     #[arg(long, global = true, value_enum, default_value = "default")]
     pub method: crate::fit::Method,
     /// fit as `fit --thorough` does (paper, synthetic)
@@ -273,7 +273,7 @@ pub struct FitArgs {
     /// known hole axis x,y,z in the cloud's frame (e.g. 0,0,1 for "on a table, hole up")
     #[arg(long, allow_hyphen_values = true)]
     pub axis: Option<String>,
-    /// pipeline: default, or paper (the paper's procedure as a baseline; see the README)
+    /// pipeline: default; search (one bounded search on the noise model, measured against the default); or paper (the paper's procedure as a baseline; see the README)
     #[arg(long, value_enum, default_value = "default")]
     pub method: crate::fit::Method,
     /// known section half-height a3 in the cloud's units (held fixed): one view cannot

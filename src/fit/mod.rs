@@ -142,6 +142,12 @@ pub enum Method {
     /// distance: the paper's top-view cost cannot be rebuilt from its text (the weights
     /// are unpublished).
     Paper,
+    /// one bounded search on one objective ([`search`]): least squares from the broad
+    /// start set, the candidates ranked and refined by the noise model's likelihood
+    /// ([`objective`]), no checks after. Not yet the default: on the fresh set 420000 in
+    /// the camera's frame it is right on 93.3% against 97.8% (partial views 90.0% against
+    /// 98.9%), at a median of 108 ms on full clouds and 119 ms on views (48 and 168 ms)
+    Search,
 }
 
 #[derive(Clone, Debug)]
@@ -425,10 +431,28 @@ pub fn fit_batch(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
-    if std::env::var("SUPERTOROID_PIPELINE").as_deref() != Ok("old")
-        && clouds.iter().all(|(_, o)| o.method == Method::Default)
-    {
-        return fit_batch_searched(evaluator, clouds);
+    let searched = |o: &FitOptions| o.method == Method::Search;
+    if clouds.iter().any(|(_, o)| searched(o)) {
+        // the searched clouds and the others in two batches, answered in the callers' order
+        let (search, checked): (Vec<_>, Vec<_>) =
+            (0..clouds.len()).partition(|&i| searched(clouds[i].1));
+        let pick = |indices: &[usize]| indices.iter().map(|&i| clouds[i]).collect::<Vec<_>>();
+        let mut answers: Vec<Option<Result<FitReport, FitError>>> =
+            (0..clouds.len()).map(|_| None).collect();
+        let found = fit_batch_searched(evaluator, &pick(&search))?;
+        for (i, r) in search.into_iter().zip(found) {
+            answers[i] = Some(r);
+        }
+        if !checked.is_empty() {
+            let found = fit_batch(evaluator, &pick(&checked))?;
+            for (i, r) in checked.into_iter().zip(found) {
+                answers[i] = Some(r);
+            }
+        }
+        return Ok(answers
+            .into_iter()
+            .map(|r| r.expect("one answer per cloud"))
+            .collect());
     }
     let mut resolved: Vec<(FitOptions, ViewpointUsed)> = clouds
         .iter()
@@ -587,7 +611,11 @@ fn fit_batch_searched(
         let (Ok(view), Ok(other)) = (&results[*i], other) else {
             continue;
         };
-        let viewpoint = resolved[*i].0.viewpoint.position().expect("an inferred viewpoint");
+        let viewpoint = resolved[*i]
+            .0
+            .viewpoint
+            .position()
+            .expect("an inferred viewpoint");
         let test = search::ViewTest::new(clouds[*i].0, viewpoint, options.stage2_points);
         // (negative log-likelihoods: lower is likelier)
         let all_round = match (dropped[*i], dropped[clouds.len() + k]) {

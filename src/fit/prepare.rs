@@ -334,7 +334,11 @@ pub(super) fn prepare<'a>(
                         .collect(),
                     _ => Vec::new(),
                 };
-                starts.into_iter().chain(across_starts).chain(behind).collect()
+                starts
+                    .into_iter()
+                    .chain(across_starts)
+                    .chain(behind)
+                    .collect()
             }
         },
         bounds,

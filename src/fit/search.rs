@@ -3,15 +3,22 @@
 //! by the likelihood of the cloud ([`super::objective`]); the finalists are refined by
 //! the estimator their noise calls for and the most likely stands.
 //!
-//! 1. Round 1: every start ([`super::prepare`]), least squares (Huber loss, free space)
-//!    for [`ROUND1_ITERATIONS`] on the stage-1 sample; the [`ROUND1_KEPT`] most likely in
-//!    distinct basins go on.
-//! 2. Round 2: those on the stage-2 sample, each in the box its cloud supports, to
-//!    convergence; the [`FINALISTS`] most likely in distinct basins, and the other reading
-//!    of the best one's top view ([`starts::turned_dual`]), are the finalists.
-//! 3. Each finalist is refined: by the likelihood where the noise biases least squares
-//!    ([`noisy`]), by least squares under a Cauchy loss otherwise; the most likely
-//!    finalist is the fit (on a precise cloud, the one closest to its points).
+//! 1. Round 1: every start of the broad set ([`super::prepare`], `StartSet::Broad`),
+//!    least squares (Huber loss, free space) for [`ROUND1_ITERATIONS`] on the stage-1
+//!    sample, all clouds' starts in one batch; the [`ROUND1_KEPT`] most likely in distinct
+//!    basins go on (a cloud with no viewpoint that is not all round its object is ranked
+//!    by its points' distances alone: where on the surface they fell is unknown).
+//! 2. Round 2: those, and the other reading of the best one's top view
+//!    ([`starts::turned_dual`]), refined by the estimator the cloud's noise calls for
+//!    ([`noisy`]): a few likelihood iterations on [`ROUND2_POINTS`] points on a noisy
+//!    cloud, least squares under a Cauchy loss on a precise one.
+//! 3. The likeliest, and any within [`CLOSE_MARGIN`] of it, converge on the stage-2
+//!    sample; the winner (and a runner-up within [`TIE_MARGIN`]) on up to
+//!    [`FINAL_POINTS`] of the cloud's points. The most likely stands.
+//!
+//! A cloud read both as a view from its frame's origin and as a view from nowhere is
+//! searched in both readings in the same batch; a reading plainly less likely after round 2
+//! ([`TWIN_MARGIN`]) goes no further.
 //!
 //! Least squares does the broad work because it is cheap and batched on the evaluator;
 //! the likelihood judges, because it is the one measure that sees what least squares
@@ -27,9 +34,6 @@ use crate::fit::objective::{self, Data, Sensor};
 pub const ROUND1_ITERATIONS: usize = 10;
 /// Candidates round 1 keeps, in distinct basins.
 pub const ROUND1_KEPT: usize = 4;
-/// Finalists round 2 keeps, in distinct basins (the other reading of the best one's top
-/// view joins them).
-pub const FINALISTS: usize = 2;
 /// A cloud searched both as a view and as a view from nowhere goes on in only one
 /// reading where that reading's best round-2 candidate is more likely than the other's
 /// by this much (mean log-likelihood per point; a view's points spread all round lose
@@ -46,9 +50,16 @@ pub const REFINE_ITERATIONS: usize = 30;
 /// Likelihood iterations and points each round-2 candidate gets before the choice.
 pub const ROUND2_ITERATIONS: usize = 5;
 pub const ROUND2_POINTS: usize = 400;
+/// Iterations of the first round of the robust least squares, and what it adds for a
+/// candidate straight from round 1 (not yet converged).
+pub const ROBUST_FIRST_ITERATIONS: usize = 15;
+pub const ROUND1_SHORTFALL: usize = 15;
 /// A round-2 candidate within this of the best (mean log-likelihood per point) converges
 /// beside it before the choice.
 pub const CLOSE_MARGIN: f64 = 0.05;
+/// Converged on the stage-2 sample, a runner-up within this of the best goes on to the
+/// final points beside it.
+pub const TIE_MARGIN: f64 = 0.01;
 /// The most points of the cloud the chosen finalist's likelihood refinement ends on, and
 /// its iterations there.
 pub const FINAL_POINTS: usize = 3000;
@@ -59,6 +70,10 @@ pub(super) struct Sample {
     points: Vec<DVec3>,
     sensor: Option<Sensor>,
     outlier_density: f64,
+    /// the cloud is neither a view from a known viewpoint nor all round its object: where
+    /// on the surface its points fell is unknown, and candidates are scored by their
+    /// points' distances alone ([`Sample::distance_score`])
+    distances_only: bool,
 }
 
 impl Sample {
@@ -68,7 +83,44 @@ impl Sample {
             points: points.to_vec(),
             sensor: viewpoint.map(|v| Sensor::new(points, v)),
             outlier_density: LIKELIHOOD_OUTLIER_WEIGHT / volume,
+            distances_only: false,
         }
+    }
+
+    /// The sample of a cloud from nowhere whose points do not cover its object all round.
+    pub(super) fn distances_only(mut self) -> Self {
+        self.distances_only = self.sensor.is_none();
+        self
+    }
+
+    /// The negative mean log-likelihood of the points' first-order distances to a
+    /// candidate under Gaussian noise `sigma` and uniform outliers: the noise model
+    /// without its density over the surface, for a cloud that says nothing about where
+    /// on the surface its points should fall.
+    fn distance_score(&self, candidate: &Candidate, sigma: f64) -> f64 {
+        let sigma = sigma.max(1e-9);
+        let w = LIKELIHOOD_OUTLIER_WEIGHT;
+        // (outliers over the residuals' range: the cloud's RMS radius is 1)
+        let outliers = w / 4.0;
+        let norm = (1.0 - w) / ((std::f64::consts::TAU).sqrt() * sigma);
+        let total: f64 = self
+            .points
+            .iter()
+            .map(|x| {
+                let g = crate::model::meridian_residual_with_gradient(
+                    &candidate.shape,
+                    candidate.pose.to_canonical(*x),
+                );
+                let slope = g.d_point.length();
+                let r = if slope > 1.0 {
+                    g.residual / slope
+                } else {
+                    g.residual
+                };
+                -(norm * (-0.5 * (r / sigma).powi(2)).exp() + outliers).ln()
+            })
+            .sum();
+        total / self.points.len().max(1) as f64
     }
 
     fn data(&self) -> Data<'_> {
@@ -88,14 +140,11 @@ impl Sample {
         self.score_on(candidate, sigma, objective::normaliser::COARSE)
     }
 
-    /// [`Sample::score`] with the normaliser on the grid refinements use.
-    pub(super) fn score_finely(&self, candidate: &Candidate, sigma: f64) -> f64 {
-        self.score_on(candidate, sigma, objective::normaliser::FINE)
-    }
-
     fn score_on(&self, candidate: &Candidate, sigma: f64, grid: (usize, usize)) -> f64 {
-        let at_floor =
-            objective::value_on(&self.data(), candidate, sigma.max(SIGMA_FLOOR), grid);
+        if self.distances_only {
+            return self.distance_score(candidate, sigma);
+        }
+        let at_floor = objective::value_on(&self.data(), candidate, sigma.max(SIGMA_FLOOR), grid);
         at_floor - (SIGMA_FLOOR / sigma.max(1e-9)).ln().max(0.0)
     }
 }
@@ -113,6 +162,19 @@ pub(super) struct Scored {
     pub iterations: usize,
     /// the likelihood refined it
     pub modelled: bool,
+    /// its sizes reach well past its cloud ([`overreach`]): least squares stretches a
+    /// size over empty space where that lowers its cost, so such a candidate ranks
+    /// behind every one that does not
+    pub overreaches: bool,
+}
+
+impl Scored {
+    /// The order candidates rank in: supported before overreaching, then likelier first.
+    fn rank(&self, other: &Scored) -> std::cmp::Ordering {
+        self.overreaches
+            .cmp(&other.overreaches)
+            .then(self.score.total_cmp(&other.score))
+    }
 }
 
 /// Whether a fit with noise `sigma` (normalised) is noisy enough for least squares to be
@@ -148,6 +210,7 @@ fn scored(
     solutions: &[Solution],
     sets: &[usize],
     samples: &[&Sample],
+    group: &[(usize, Prepared)],
 ) -> Result<Vec<Scored>, FitError> {
     let candidates: Vec<Candidate> = solutions.iter().map(|s| s.candidate).collect();
     let residuals = evaluator.residuals_on(&candidates, sets)?;
@@ -164,6 +227,9 @@ fn scored(
             cost: solution.cost,
             iterations: solution.iterations,
             modelled: false,
+            overreaches: group[set]
+                .1
+                .overreaches(&solution.candidate, &group[set].1.stage2_pts),
         });
     }
     Ok(out)
@@ -171,7 +237,7 @@ fn scored(
 
 /// The best `keep` of one cloud's candidates in distinct basins, most likely first.
 fn most_likely_distinct(mut candidates: Vec<Scored>, keep: usize) -> Vec<Scored> {
-    candidates.sort_by(|a, b| a.score.total_cmp(&b.score));
+    candidates.sort_by(|a, b| a.rank(b));
     let mut kept: Vec<Scored> = Vec::new();
     for c in candidates {
         if kept.len() == keep {
@@ -191,8 +257,6 @@ fn most_likely_distinct(mut candidates: Vec<Scored>, keep: usize) -> Vec<Scored>
 pub(super) struct Found {
     pub best: Scored,
     pub stage1_iterations: usize,
-    /// candidates tried: starts, round-2 candidates, finalists
-    pub tried: [usize; 3],
     pub round1_ms: f64,
     pub round2_ms: f64,
     pub finalists_ms: f64,
@@ -209,13 +273,24 @@ pub(super) fn search_group(
     let t0 = Instant::now();
     let (opts1, opts2) = (group[0].1.opts1, group[0].1.opts2);
     let bounds = group[0].1.bounds;
+    // (a cloud from nowhere is ranked by its points' distances until its candidates show
+    // whether it covers its object all round)
+    // (the reading from nowhere of a cloud searched as a view too is all round by its
+    // own premise: the likelihood tells the two readings apart)
+    let nowhere_twin: Vec<bool> = (0..group.len())
+        .map(|c| twins.iter().any(|&(_, b)| b == c))
+        .collect();
     let samples1: Vec<Sample> = group
         .iter()
-        .map(|(_, p)| Sample::new(&p.stage1_pts, p.viewpoint))
-        .collect();
-    let samples2: Vec<Sample> = group
-        .iter()
-        .map(|(_, p)| Sample::new(&p.stage2_pts, p.viewpoint))
+        .enumerate()
+        .map(|(cloud, (_, p))| {
+            let s = Sample::new(&p.stage1_pts, p.viewpoint);
+            if nowhere_twin[cloud] {
+                s
+            } else {
+                s.distances_only()
+            }
+        })
         .collect();
 
     // Round 1: every start on the stage-1 sample.
@@ -243,11 +318,7 @@ pub(super) fn search_group(
         .collect();
     let (live, live_sets): (Vec<Solution>, Vec<usize>) = live.into_iter().unzip();
     let sample_refs: Vec<&Sample> = samples1.iter().collect();
-    let ts = Instant::now();
-    let scored1 = scored(evaluator, &live, &live_sets, &sample_refs)?;
-    if std::env::var("DEBUG_TIME").is_ok() {
-        eprintln!("round1 ls {:.1} ms, scoring {} candidates {:.1} ms", (ts - t0).as_secs_f64() * 1e3, live.len(), ts.elapsed().as_secs_f64() * 1e3);
-    }
+    let scored1 = scored(evaluator, &live, &live_sets, &sample_refs, group)?;
     let stage1_iterations: Vec<usize> = (0..group.len())
         .map(|cloud| {
             live.iter()
@@ -269,67 +340,154 @@ pub(super) fn search_group(
             most_likely_distinct(own, ROUND1_KEPT)
         })
         .collect();
-    let t1 = t0.elapsed();
-    if std::env::var("DEBUG_SEARCH").is_ok() {
-        for (c, s) in scored1.iter().zip(&live_sets) {
-            eprintln!("r1 cloud {s} score {:.4} sigma {:.4} cost {:.4} axis {:.3?} shape {:.3?}", c.score, c.sigma, c.cost, c.candidate.pose.axis(), c.candidate.shape.to_array());
+    // a cloud from nowhere is all round its object where its points cover the likeliest
+    // candidate's surface; otherwise no reading but its points' distances holds, and as
+    // the twin of a view it goes no further
+    let all_round: Vec<bool> = group
+        .iter()
+        .zip(&kept1)
+        .enumerate()
+        .map(|(cloud, ((_, p), kept))| {
+            p.viewpoint.is_none()
+                && (nowhere_twin[cloud]
+                    || kept.first().is_some_and(|best| {
+                        likelihood::surface_coverage(
+                            &p.stage2_pts,
+                            &best.candidate,
+                            best.sigma.max(REFINE_SIGMA_FLOOR),
+                        ) >= LIKELIHOOD_MIN_COVERAGE
+                    }))
+        })
+        .collect();
+    let mut dropped = vec![false; group.len()];
+    let sample = |p: &Prepared, points: &[DVec3], cloud: usize| {
+        let s = Sample::new(points, p.viewpoint);
+        if all_round[cloud] {
+            s
+        } else {
+            s.distances_only()
         }
-        eprintln!("starts {}", starts.len());
-    }
+    };
+    let samples2: Vec<Sample> = group
+        .iter()
+        .enumerate()
+        .map(|(cloud, (_, p))| sample(p, &p.stage2_pts, cloud))
+        .collect();
+    let t1 = t0.elapsed();
 
     // Round 2: the kept candidates, and the other reading of the best one's top view,
-    // refined by the estimator the cloud's noise calls for, on the round-2 sample.
+    // refined by the estimator the cloud's noise calls for (one estimator for all of a
+    // cloud's candidates, chosen on its likeliest one: candidates are compared by one
+    // measure).
     let sets2: Vec<PointSet> = group.iter().map(|(_, p)| p.stage2_set()).collect();
     evaluator.set_point_sets_with_free_space(&sets2)?;
-    let mut round2: Vec<Vec<Scored>> = Vec::with_capacity(group.len());
-    for (cloud, (_, p)) in group.iter().enumerate() {
-        let mid: Vec<DVec3> = p
-            .stage2_pts
-            .iter()
-            .step_by(p.stage2_pts.len().div_ceil(ROUND2_POINTS).max(1))
-            .copied()
-            .collect();
-        let mid = Sample::new(&mid, p.viewpoint);
-        let mut candidates = kept1[cloud].clone();
-        let readings = candidates.len();
-        if let Some(best) = candidates.first()
-            && let Some(dual) = p.turned_dual(&best.candidate)
-        {
-            candidates.push(Scored {
-                candidate: dual,
-                ..*best
-            });
-        }
-        // (one estimator for all of a cloud's candidates, chosen on its most likely one:
-        // candidates are compared by one measure)
-        let noise = p.scatter().unwrap_or(candidates[0].sigma);
-        let modelled = noisy(p, &candidates[0].candidate, noise);
-        let mut refined = Vec::with_capacity(candidates.len());
-        for (k, c) in candidates.into_iter().enumerate() {
-            refined.push(refine_candidate(
-                evaluator,
-                p,
-                &mid,
-                cloud,
-                c,
-                k >= readings,
-                modelled.then_some(noise),
-            )?);
-        }
-        if std::env::var("DEBUG_SEARCH").is_ok() {
-            for c in &refined {
-                eprintln!("r2 cloud {cloud} score {:.4} sigma {:.4} modelled {} axis {:.3?} shape {:.3?}", c.score, c.sigma, c.modelled, c.candidate.pose.axis(), c.candidate.shape.to_array());
+    let noise: Vec<Option<f64>> = group
+        .iter()
+        .zip(&kept1)
+        .map(|((_, p), kept)| {
+            let best = kept.first()?;
+            let noise = p.scatter().unwrap_or(best.sigma);
+            noisy(p, &best.candidate, noise).then_some(noise)
+        })
+        .collect();
+    let mids: Vec<Sample> = group
+        .iter()
+        .enumerate()
+        .map(|(cloud, (_, p))| {
+            let mid: Vec<DVec3> = p
+                .stage2_pts
+                .iter()
+                .step_by(p.stage2_pts.len().div_ceil(ROUND2_POINTS).max(1))
+                .copied()
+                .collect();
+            sample(p, &mid, cloud)
+        })
+        .collect();
+    // precise clouds: least squares on the stage-2 sample, every candidate in one batch,
+    // then the robust rounds for the two likeliest in distinct basins
+    let precise: Vec<usize> = (0..group.len())
+        .filter(|&c| noise[c].is_none() && !dropped[c])
+        .collect();
+    let mut round2: Vec<Vec<Scored>> = kept1.clone();
+    if !precise.is_empty() {
+        let mut candidates = Vec::new();
+        let mut sets = Vec::new();
+        for &cloud in &precise {
+            let p = &group[cloud].1;
+            let kept = &kept1[cloud];
+            let dual = kept.first().and_then(|best| p.turned_dual(&best.candidate));
+            for c in kept.iter().map(|k| k.candidate).chain(dual) {
+                candidates.push(c);
+                sets.push(cloud);
             }
         }
-        round2.push(refined);
+        let boxes: Vec<Bounds> = candidates
+            .iter()
+            .zip(&sets)
+            .map(|(c, &cloud)| group[cloud].1.supported_bounds(c))
+            .collect();
+        let solutions = solve_on(evaluator, &candidates, &sets, &boxes, &opts2)?;
+        let sample_refs: Vec<&Sample> = mids.iter().collect();
+        let scored2 = scored(evaluator, &solutions, &sets, &sample_refs, group)?;
+        for &cloud in &precise {
+            let p = &group[cloud].1;
+            let own: Vec<Scored> = scored2
+                .iter()
+                .zip(&sets)
+                .filter(|(_, s)| **s == cloud)
+                .map(|(c, _)| *c)
+                .collect();
+            let mut refined = Vec::new();
+            for c in most_likely_distinct(own, 2) {
+                refined.push(robust_candidate(evaluator, p, &mids[cloud], cloud, c, 0)?);
+            }
+            // and the likeliest start straight into the robust rounds: outliers pull the
+            // Huber fit of a precise view into other basins often enough
+            if let Some(first) = kept1[cloud].first() {
+                let direct =
+                    robust_candidate(evaluator, p, &mids[cloud], cloud, *first, ROUND1_SHORTFALL)?;
+                refined.push(direct);
+            }
+            round2[cloud] = refined;
+        }
+    }
+    for (cloud, (_, p)) in group.iter().enumerate() {
+        let Some(noise) = noise[cloud].filter(|_| !dropped[cloud]) else {
+            continue;
+        };
+        let mut refined = Vec::with_capacity(kept1[cloud].len() + 1);
+        for c in &kept1[cloud] {
+            refined.push(likelihood_candidate(p, &mids[cloud], *c, noise));
+        }
+        // the other reading of the likeliest one's top view (least squares cannot tell
+        // the two apart: the likelihood can, given the points), after least squares in
+        // its own basin
+        let best = choose(&refined);
+        if let Some(dual) = p.turned_dual(&best.candidate) {
+            let dual = robust_candidate(
+                evaluator,
+                p,
+                &mids[cloud],
+                cloud,
+                Scored {
+                    candidate: dual,
+                    ..best
+                },
+                ROUND1_SHORTFALL,
+            )?;
+            refined.push(likelihood_candidate(p, &mids[cloud], dual, noise));
+        }
+        round2[cloud] = refined;
     }
     let t2 = t0.elapsed();
 
     // Twins (one cloud read as a view and as a view from nowhere): the reading whose best
     // candidate is plainly less likely than the other's goes no further.
     let best2: Vec<Scored> = round2.iter().map(|r| choose(r)).collect();
-    let mut dropped = vec![false; group.len()];
     for &(a, b) in twins {
+        if dropped[a] || dropped[b] {
+            continue;
+        }
         if best2[a].score + TWIN_MARGIN < best2[b].score {
             dropped[b] = true;
         } else if best2[b].score + TWIN_MARGIN < best2[a].score {
@@ -347,20 +505,23 @@ pub(super) fn search_group(
             // (a runner-up about as likely on the round-2 sample converges too, and the
             // likelier of the two on the stage-2 sample stands: the two readings of a
             // top view are often that close)
-            let mut close: Vec<Scored> = round2[cloud]
+            let close: Vec<Scored> = round2[cloud]
                 .iter()
                 .filter(|c| c.modelled && c.score <= best.score + CLOSE_MARGIN)
                 .copied()
                 .collect();
-            close.sort_by(|a, b| a.score.total_cmp(&b.score));
-            close.truncate(2);
-            best = close
+            let close = most_likely_distinct(close, 2);
+            let mut converged: Vec<Scored> = close
                 .into_iter()
                 .map(|c| converge(p, &samples2[cloud], c, REFINE_ITERATIONS))
-                .min_by(|a, b| a.score.total_cmp(&b.score))
-                .unwrap_or(best);
-            // then a few steps on more of the cloud's points: from near the optimum they
-            // converge at once, and the estimate's variance falls with the points
+                .collect();
+            converged.sort_by(|a, b| a.rank(b));
+            if let Some(first) = converged.first() {
+                best = *first;
+            }
+            // then on more of the cloud's points, the runner-up too where it is as likely
+            // still: the estimate's variance, and the readings' likelihoods' noise, fall
+            // with the points
             let more: Vec<DVec3> = p
                 .points
                 .iter()
@@ -368,13 +529,18 @@ pub(super) fn search_group(
                 .map(|x| p.norm.point(*x))
                 .collect();
             if more.len() > p.stage2_pts.len() && best.modelled {
-                best = converge(p, &Sample::new(&more, p.viewpoint), best, FINAL_ITERATIONS);
+                let more = sample(p, &more, cloud);
+                best = converged
+                    .iter()
+                    .filter(|c| c.modelled && c.score <= best.score + TIE_MARGIN)
+                    .map(|c| converge(p, &more, *c, FINAL_ITERATIONS))
+                    .min_by(|a, b| a.score.total_cmp(&b.score))
+                    .unwrap_or(best);
             }
         }
         found.push(Found {
             best,
             stage1_iterations: stage1_iterations[cloud],
-            tried: [group[cloud].1.starts.len(), round2[cloud].len(), 1],
             round1_ms: t1.as_secs_f64() * 1e3,
             round2_ms: (t2 - t1).as_secs_f64() * 1e3,
             finalists_ms: 0.0,
@@ -392,7 +558,7 @@ pub(super) fn search_group(
 fn choose(refined: &[Scored]) -> Scored {
     *refined
         .iter()
-        .min_by(|a, b| a.score.total_cmp(&b.score))
+        .min_by(|a, b| a.rank(b))
         .expect("one finalist at least")
 }
 
@@ -414,6 +580,7 @@ fn converge(p: &Prepared, sample: &Sample, best: Scored, iterations: usize) -> S
         sigma: r.sigma,
         score: r.objective,
         iterations: best.iterations + r.iterations,
+        overreaches: p.overreaches(&r.candidate, &p.stage2_pts),
         ..best
     }
 }
@@ -426,46 +593,40 @@ fn collapsed(r: &objective::Refined, sigma: f64) -> bool {
         || r.sigma > MAX_SIGMA_GROWTH * sigma.max(REFINE_SIGMA_FLOOR)
 }
 
-/// One candidate refined by the estimator the cloud's noise calls for: with `noise` (the
-/// cloud's own scatter, where [`noisy`]) by the likelihood for [`ROUND2_ITERATIONS`] on
-/// `sample`; otherwise to convergence by least squares under a Cauchy loss (on the
-/// stage-2 set `set`, uploaded), scored on `sample`. The other reading of a top view
-/// gets least squares first in either case (it starts far from its optimum).
-fn refine_candidate(
+/// A candidate solved by robust least squares (on the stage-2 set `set`, uploaded), and
+/// scored on `sample`.
+fn robust_candidate(
     evaluator: &mut dyn Evaluator,
     p: &Prepared,
     sample: &Sample,
     set: usize,
     c: Scored,
-    other_reading: bool,
-    noise: Option<f64>,
+    more_iterations: usize,
 ) -> Result<Scored, FitError> {
-    let c = if noise.is_some() && !other_reading {
-        c
-    } else {
-        // (stage 2's least squares on its whole sample, then the robust rounds)
-        let bounds = p.supported_bounds(&c.candidate);
-        let solution = solve_on(evaluator, &[c.candidate], &[set], &[bounds], &p.opts2)?
-            .pop()
-            .expect("one solution per start");
-        let solution = Solution {
-            iterations: c.iterations + solution.iterations,
-            ..solution
-        };
-        let robust = robust_least_squares(evaluator, p, set, solution)?;
-        let sigma = robust_scale(&evaluator.residuals_on(&[robust.candidate], &[set])?);
-        Scored {
-            candidate: robust.candidate,
-            sigma,
-            score: sample.score(&robust.candidate, sigma),
-            cost: robust.cost,
-            iterations: robust.iterations,
-            modelled: false,
-        }
+    let start = Solution {
+        candidate: c.candidate,
+        cost: c.cost,
+        count: 0,
+        iterations: c.iterations,
+        stop: Stop::CostChange,
+        log: Vec::new(),
     };
-    let Some(noise) = noise else {
-        return Ok(c);
-    };
+    let robust = robust_least_squares(evaluator, p, set, start, more_iterations)?;
+    let sigma = robust_scale(&evaluator.residuals_on(&[robust.candidate], &[set])?);
+    Ok(Scored {
+        candidate: robust.candidate,
+        sigma,
+        score: sample.score(&robust.candidate, sigma),
+        cost: robust.cost,
+        iterations: robust.iterations,
+        modelled: false,
+        overreaches: p.overreaches(&robust.candidate, &p.stage2_pts),
+    })
+}
+
+/// A candidate of a noisy cloud (`noise`, its own scatter) refined by the likelihood for
+/// [`ROUND2_ITERATIONS`] on `sample`; as it was where the refinement collapses.
+fn likelihood_candidate(p: &Prepared, sample: &Sample, c: Scored, noise: f64) -> Scored {
     let start = c.sigma.max(noise).max(REFINE_SIGMA_FLOOR);
     let r = objective::refine_on(
         &sample.data(),
@@ -476,16 +637,17 @@ fn refine_candidate(
         objective::normaliser::COARSE,
     );
     if collapsed(&r, start) {
-        return Ok(c);
+        return c;
     }
-    Ok(Scored {
+    Scored {
         candidate: r.candidate,
         sigma: r.sigma,
         score: r.objective,
         cost: c.cost,
         iterations: c.iterations + r.iterations,
         modelled: true,
-    })
+        overreaches: p.overreaches(&r.candidate, &p.stage2_pts),
+    }
 }
 
 /// A solution solved again under a Cauchy loss scaled by its own residuals' spread, in
@@ -495,8 +657,12 @@ fn robust_least_squares(
     p: &Prepared,
     set: usize,
     solution: Solution,
+    more_iterations: usize,
 ) -> Result<Solution, FitError> {
-    let Some(k) = p.refine_scale.filter(|_| !p.skip.contains(&Stage::RobustRefine)) else {
+    let Some(k) = p
+        .refine_scale
+        .filter(|_| !p.skip.contains(&Stage::RobustRefine))
+    else {
         return Ok(solution);
     };
     let mut median = {
@@ -509,16 +675,22 @@ fn robust_least_squares(
         let options = SolverOptions {
             loss: Loss::Cauchy(k * sigma),
             max_iterations: if round == 0 {
-                15
+                ROBUST_FIRST_ITERATIONS + more_iterations
             } else {
                 ROBUST_LATER_ITERATIONS
             },
             ..p.opts2
         };
         let bounds = p.supported_bounds(&solution.candidate);
-        let r = solve_on(evaluator, &[solution.candidate], &[set], &[bounds], &options)?
-            .pop()
-            .expect("one solution per start");
+        let r = solve_on(
+            evaluator,
+            &[solution.candidate],
+            &[set],
+            &[bounds],
+            &options,
+        )?
+        .pop()
+        .expect("one solution per start");
         let next = robust_scale(&evaluator.residuals_on(&[r.candidate], &[set])?) / 1.4826;
         if round > 0 && next >= median {
             break;

@@ -84,7 +84,7 @@ pub struct FitRequestOptions {
     /// last polish) no longer start (default: no budget; the first fit always completes;
     /// the checks left out are named in `timing_ms.over_budget`)
     pub time_budget_ms: Option<f64>,
-    /// pipeline: default, or paper (the paper's procedure, a baseline)
+    /// pipeline: default; search (one bounded search on the noise model, measured against the default); or paper (the paper's procedure, a baseline)
     pub method: Option<crate::fit::Method>,
     /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
     pub format: Option<Format>,

@@ -124,12 +124,6 @@ pub struct Objective<'a> {
     pub visible: Option<Vec<bool>>,
 }
 
-pub static EVALS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-pub static GRADS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-pub static POINTS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-pub static PAIRS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-pub static HITS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-
 /// One point's sums over its window: the kernel sum and its partials.
 #[derive(Default)]
 struct PointSums {
@@ -188,9 +182,6 @@ impl<'a> Objective<'a> {
     /// The mean negative log-likelihood per point; with `with_gradient` also its
     /// gradient and the BHHH approximation of its Hessian.
     pub fn evaluate(&self, x: &Vector, with_gradient: bool) -> (f64, Vector, Matrix) {
-        EVALS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        if with_gradient { GRADS.fetch_add(1, std::sync::atomic::Ordering::Relaxed); }
-        POINTS.fetch_add(self.data.points.len(), std::sync::atomic::Ordering::Relaxed);
         let shape = Self::shape(x);
         let sigma = x[12].exp();
         let rotation = self.rotation(x);
@@ -374,7 +365,9 @@ impl<'a> Window<'a> {
         // the radii of the window's sweep samples bound how near a node's sweep comes
         let (r_lo, r_hi) = (0..span)
             .map(|j| self.radius[(first + j) % count])
-            .fold((f64::INFINITY, 0.0f64), |(lo, hi), r| (lo.min(r), hi.max(r)));
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), r| {
+                (lo.min(r), hi.max(r))
+            });
         for k in 0..self.section.point.len() {
             let [c, w] = self.section.point[k];
             let lambda = a4 + c;

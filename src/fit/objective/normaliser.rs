@@ -134,13 +134,14 @@ pub fn normaliser(
     let unit = UnitCurves::new(shape, grid);
     let cells = Cells::new(shape, &unit);
     // the cells with shape parameter k moved by a small step (the unit curves kept for
-    // the sizes, made again for the exponents)
+    // the sizes, made again for the exponents and for a4, which moves the end of an open
+    // section)
     let moved = |k: usize| {
         let mut v = shape.to_array();
         let step = 1e-6 * v[k].abs().max(1e-2);
         v[k] += step;
         let moved = Shape::from_array(v);
-        let cells = if k < 4 {
+        let cells = if k < 3 {
             Cells::new(&moved, &unit)
         } else {
             Cells::new(&moved, &UnitCurves::new(&moved, grid))

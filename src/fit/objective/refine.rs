@@ -39,7 +39,14 @@ pub fn refine(
     limits: &Limits,
     max_iterations: usize,
 ) -> Refined {
-    refine_on(data, start, sigma, limits, max_iterations, super::normaliser::FINE)
+    refine_on(
+        data,
+        start,
+        sigma,
+        limits,
+        max_iterations,
+        super::normaliser::FINE,
+    )
 }
 
 /// [`refine`] with the normaliser on `area_grid` ([`super::normaliser::COARSE`]: a
@@ -70,9 +77,16 @@ pub fn refine_on(
     let project = |mut x: Vector| {
         for k in 0..6 {
             let margin = 1e-3 * (b.upper[k] - b.lower[k]);
-            x[k] = x[k].clamp(b.lower[k] + margin.min(0.5 * b.lower[k].max(1e-9)), b.upper[k] - margin);
+            x[k] = x[k].clamp(
+                b.lower[k] + margin.min(0.5 * b.lower[k].max(1e-9)),
+                b.upper[k] - margin,
+            );
         }
-        x[3] = if holed { x[3].max(1.01) } else { x[3].min(0.99) };
+        x[3] = if holed {
+            x[3].max(1.01)
+        } else {
+            x[3].min(0.99)
+        };
         x[12] = x[12].clamp((1e-3 * sigma).ln(), (1e2 * sigma).ln());
         x
     };
@@ -115,9 +129,6 @@ pub fn refine_on(
         let trial = project(x + step);
         let step = trial - x;
         let f_trial = objective.evaluate(&trial, false).0;
-        if std::env::var("DEBUG_REFINE").is_ok() {
-            eprintln!("    it {iterations} f {f:.6} trial {f_trial:.6} lambda {lambda:.1e} step {:.2e} sigma {:.4}", step.norm(), x[12].exp());
-        }
         if f_trial < f {
             let decrease = f - f_trial;
             x = trial;

@@ -88,17 +88,20 @@ fn gradient_matches_differences(shape: Shape, sensor: bool) {
     };
     let objective = Objective::new(&data, &start, 0.035);
     let x = parameters(&start, 0.035);
-    let (_, gradient, _) = objective.evaluate(&x, true);
+    let (value, gradient, _) = objective.evaluate(&x, true);
     for k in 0..PARAMETERS {
-        let h = 1e-6;
+        // the objective is smooth by pieces (the incidence is clipped at grazing elements):
+        // at a kink the gradient is one of the two one-sided derivatives
+        let h = 1e-7;
         let (mut up, mut down) = (x, x);
         up[k] += h;
         down[k] -= h;
-        let numeric =
-            (objective.evaluate(&up, false).0 - objective.evaluate(&down, false).0) / (2.0 * h);
+        let forward = (objective.evaluate(&up, false).0 - value) / h;
+        let backward = (value - objective.evaluate(&down, false).0) / h;
+        let close = |numeric: f64| (numeric - gradient[k]).abs() < 2e-4 * (1.0 + numeric.abs());
         assert!(
-            (numeric - gradient[k]).abs() < 2e-4 * (1.0 + numeric.abs()),
-            "{shape:?}, sensor {sensor}: parameter {k}: analytic {} numeric {numeric}",
+            close(0.5 * (forward + backward)) || close(forward) || close(backward),
+            "{shape:?}, sensor {sensor}: parameter {k}: analytic {} forward {forward} backward {backward}",
             gradient[k]
         );
     }
@@ -179,7 +182,15 @@ fn the_tables_and_the_normaliser_agree_on_the_area() {
             area
         };
         let area = table_area(0.01);
-        let n = normaliser::normaliser(&shape, DQuat::IDENTITY, DVec3::ZERO, None, normaliser::FINE, None, false);
+        let n = normaliser::normaliser(
+            &shape,
+            DQuat::IDENTITY,
+            DVec3::ZERO,
+            None,
+            normaliser::FINE,
+            None,
+            false,
+        );
         assert!(
             (area / n.area - 1.0).abs() < 0.01,
             "{shape:?}: tables {area}, grid {}",
@@ -202,7 +213,15 @@ fn the_window_misses_nothing() {
     ] {
         let sigma = 0.03;
         let grid = Grid::for_shape(&shape, sigma);
-        let n = normaliser::normaliser(&shape, DQuat::IDENTITY, DVec3::ZERO, None, normaliser::FINE, None, false);
+        let n = normaliser::normaliser(
+            &shape,
+            DQuat::IDENTITY,
+            DVec3::ZERO,
+            None,
+            normaliser::FINE,
+            None,
+            false,
+        );
         let window = Window::new(&grid, &shape, sigma, &n);
         let points = cloud(shape, Pose::default(), 300, 1.5 * sigma, rng.random());
         let mut worst: f64 = 0.0;
@@ -236,37 +255,5 @@ fn the_window_misses_nothing() {
             worst < 1e-9,
             "{shape:?}: a window missed {worst} of a point's sum"
         );
-    }
-}
-
-#[test]
-#[ignore]
-fn time_the_parts() {
-    let shape = Shape::new(0.3, 0.2, 0.06, 2.0, 0.7, 1.3);
-    let pose = Pose::new(DQuat::from_scaled_axis(DVec3::new(0.3, -0.2, 0.5)), DVec3::new(0.05, -0.02, 0.1));
-    let points = cloud(shape, pose, 1000, 0.02, 7);
-    let viewpoint = DVec3::new(0.9, -1.4, 3.1);
-    let sensor = Sensor::new(&points, viewpoint);
-    for with_sensor in [false, true] {
-        let data = Data { points: &points, outlier_weight: 0.05, outlier_density: 0.05 / 8.0, sensor: with_sensor.then_some(&sensor) };
-        let c = Candidate { shape, pose };
-        let o = Objective::new(&data, &c, 0.02);
-        let x = parameters(&c, 0.02);
-        let t = std::time::Instant::now();
-        for _ in 0..20 { normaliser::normaliser(&shape, pose.rotation, pose.translation, with_sensor.then_some((viewpoint, 1.0)), normaliser::FINE, None, true); }
-        let tn = t.elapsed().as_secs_f64() * 1e3 / 20.0;
-        let t = std::time::Instant::now();
-        for _ in 0..20 { normaliser::normaliser(&shape, pose.rotation, pose.translation, with_sensor.then_some((viewpoint, 1.0)), normaliser::FINE, None, false); }
-        let tn0 = t.elapsed().as_secs_f64() * 1e3 / 20.0;
-        let t = std::time::Instant::now();
-        for _ in 0..20 { Window::new(&o.grid, &shape, 0.02, &normaliser::normaliser(&shape, pose.rotation, pose.translation, None, normaliser::FINE, None, false)); }
-        let tw = t.elapsed().as_secs_f64() * 1e3 / 20.0;
-        let t = std::time::Instant::now();
-        for _ in 0..20 { o.evaluate(&x, true); }
-        let tg = t.elapsed().as_secs_f64() * 1e3 / 20.0;
-        let t = std::time::Instant::now();
-        for _ in 0..20 { o.evaluate(&x, false); }
-        let tv = t.elapsed().as_secs_f64() * 1e3 / 20.0;
-        eprintln!("sensor {with_sensor}: normaliser grad {tn:.2} ms, value {tn0:.2}; window {tw:.2}; evaluate grad {tg:.2} value {tv:.2}; grid {} x {}", o.grid.section.len(), o.grid.sweep);
     }
 }
