@@ -89,6 +89,55 @@ fn main() {
                 fr.objective,
                 objective::value(&data, &fitted, fs)
             );
+            for vv in [v, None] {
+                let sensor2 = vv.map(|v| objective::Sensor::new(&sample, v));
+                let d2 = objective::Data {
+                    sensor: sensor2.as_ref(),
+                    ..data
+                };
+                println!(
+                    "  at truth, sensor {}: new {:.4} old {:?}",
+                    vv.is_some(),
+                    objective::value(&d2, &truth, sigma),
+                    likelihood::objective(&sample, &truth, sigma, LIKELIHOOD_OUTLIER_WEIGHT, vv)
+                );
+            }
+            let ol = likelihood::Limits {
+                bounds: options.bounds(),
+                fixed_shape: [false; 6],
+                fixed_axis: false,
+            };
+            let e = |c: &supertoroid::eval::Candidate| {
+                let (s, p) = norm.to_world(c);
+                compare((&case.shape, &case.pose), (&s, &p))
+            };
+            let fre = e(&fr.candidate);
+            println!(
+                "  new model from fit: success {} eps {:.3} sz {:.3}",
+                fre.success(),
+                fre.eps,
+                fre.sizes
+            );
+            for (name, start, s0) in [("truth", truth, sigma), ("fit", fitted, fs)] {
+                if let Some(o) = likelihood::refine_finely(
+                    &sample,
+                    &start,
+                    s0,
+                    LIKELIHOOD_OUTLIER_WEIGHT,
+                    v,
+                    &ol,
+                    60,
+                ) {
+                    let oe = e(&o.candidate);
+                    println!(
+                        "  old model from {name}: success {} eps {:.3} sz {:.3} obj {:.4}",
+                        oe.success(),
+                        oe.eps,
+                        oe.sizes,
+                        o.objective
+                    );
+                }
+            }
         }
     }
 }

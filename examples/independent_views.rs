@@ -5,13 +5,15 @@
 //! Each cloud is fitted with no options (the viewpoint found), as a view from nowhere, and
 //! with the camera's position given; successes by the suite's rule and median fit times.
 //!
-//! `cargo run --release --example independent_views -- [CASES] [FIRST_SEED]`
+//! `cargo run --release --example independent_views -- [CASES] [FIRST_SEED] [METHOD]`
+//! (METHOD: default, search or paper).
 
 use glam::{DQuat, DVec3};
 use rand::Rng;
 use supertoroid::eval::CpuEvaluator;
 use supertoroid::fit::ground_truth::compare;
-use supertoroid::fit::{FitOptions, Viewpoint, fit};
+use clap::ValueEnum;
+use supertoroid::fit::{FitOptions, Method, Viewpoint, fit};
 use supertoroid::model::{Pose, Shape};
 use supertoroid::synth::{self, Camera, Intrinsics};
 
@@ -66,6 +68,9 @@ fn main() {
     let first: u64 = args
         .next()
         .map_or(900_000, |a| a.parse().expect("FIRST_SEED"));
+    let method = args.next().map_or(Method::Default, |a| {
+        Method::from_str(&a, true).expect("METHOD: default, search or paper")
+    });
     let mut evaluator = CpuEvaluator::new();
     let variants = [
         ("no options", Viewpoint::Auto),
@@ -80,6 +85,7 @@ fn main() {
             let options = FitOptions {
                 seed,
                 viewpoint: *viewpoint,
+                method,
                 ..Default::default()
             };
             let report = fit(&mut evaluator, &points, &options).expect("a fit");
@@ -88,7 +94,7 @@ fn main() {
             times[k].push(report.timing_ms.total);
         }
     }
-    println!("{cases} independent single views (seeds {first}..), CPU evaluator:");
+    println!("{cases} independent single views (seeds {first}..), {method:?}, CPU evaluator:");
     for (k, (name, _)) in variants.iter().enumerate() {
         let t = &mut times[k];
         t.sort_by(f64::total_cmp);

@@ -22,12 +22,27 @@ impl View {
         viewpoint: DVec3,
     ) -> Self {
         let centre = cells.iter().copied().sum::<DVec3>() / cells.len().max(1) as f64;
-        let visible = visibility(cells, areas, normals, grid, centre, viewpoint);
+        let visible = visibility(cells, areas, normals, grid, centre, viewpoint, true);
         Self {
             viewpoint,
             visible,
             reference: (centre - viewpoint).length_squared(),
         }
+    }
+
+    /// Which cells no other part of the surface hides from a sensor at `viewpoint`,
+    /// whether they face it or not: a cell across a sharp edge (the rim of a pinched
+    /// section) faces away at its centre while half of it faces the sensor, so a caller
+    /// that weighs the parts of each cell by their own incidence asks this.
+    pub(crate) fn unoccluded(
+        cells: &[DVec3],
+        areas: &[f64],
+        normals: &[DVec3],
+        grid: (usize, usize),
+        viewpoint: DVec3,
+    ) -> Vec<bool> {
+        let centre = cells.iter().copied().sum::<DVec3>() / cells.len().max(1) as f64;
+        visibility(cells, areas, normals, grid, centre, viewpoint, false)
     }
 
     /// A depth sensor's points per unit area of a surface it sees: cos(incidence) /
@@ -79,6 +94,7 @@ pub(crate) fn visibility(
     (rings, sectors): (usize, usize),
     centre: DVec3,
     viewpoint: DVec3,
+    facing_only: bool,
 ) -> Vec<bool> {
     let m = cells.len();
     let forward = (centre - viewpoint).normalize_or(DVec3::Z);
@@ -207,7 +223,7 @@ pub(crate) fn visibility(
     (0..m)
         .map(|j| {
             let Some(p) = projected[j] else { return false };
-            if !facing[j] {
+            if facing_only && !facing[j] {
                 return false;
             }
             let (x, y, depth) = screen(p);
@@ -217,7 +233,7 @@ pub(crate) fn visibility(
             }
             // the depth the cell's own surface spans from its centre to a pixel's
             // centre: a pixel's diagonal times tan(incidence), the cosine floored at 0.1
-            let cos = incidence[j].max(0.1);
+            let cos = incidence[j].abs().max(0.1);
             let slope = std::f64::consts::SQRT_2 * pixel * depth * (1.0 - cos * cos).sqrt() / cos;
             depth <= 1.0 / nearest[k] as f64 + 0.25 * spacing + slope
         })

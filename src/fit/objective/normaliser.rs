@@ -178,7 +178,7 @@ pub fn normaliser(
     let (world_cells, world_normals) = world(&cells, rotation, translation);
     let visible: Vec<bool> = match held {
         Some(held) if held.len() == cells.areas.len() => held.to_vec(),
-        _ => View::new(&world_cells, &cells.areas, &world_normals, grid, viewpoint).visible,
+        _ => View::unoccluded(&world_cells, &cells.areas, &world_normals, grid, viewpoint),
     };
     let density = |areas: &[f64], cells: &[DVec3], normals: &[DVec3]| -> f64 {
         (0..cells.len())
@@ -186,7 +186,7 @@ pub fn normaliser(
             .map(|j| {
                 let q = cells[j] - viewpoint;
                 let range2 = q.length_squared();
-                let cos = normals[j].dot(q).abs() / range2.sqrt();
+                let cos = (-normals[j].dot(q)).max(0.0) / range2.sqrt();
                 areas[j] * cos * reference / range2
             })
             .sum()
