@@ -8,11 +8,11 @@
 //! `cargo run --release --example independent_views -- [CASES] [FIRST_SEED] [METHOD]`
 //! (METHOD: default, search or paper).
 
+use clap::ValueEnum;
 use glam::{DQuat, DVec3};
 use rand::Rng;
 use supertoroid::eval::CpuEvaluator;
 use supertoroid::fit::ground_truth::compare;
-use clap::ValueEnum;
 use supertoroid::fit::{FitOptions, Method, Viewpoint, fit};
 use supertoroid::model::{Pose, Shape};
 use supertoroid::synth::{self, Camera, Intrinsics};
@@ -89,8 +89,16 @@ fn main() {
                 ..Default::default()
             };
             let report = fit(&mut evaluator, &points, &options).expect("a fit");
-            right[k] +=
-                compare((&shape, &pose), (&report.fitted.0, &report.fitted.1)).success() as usize;
+            let success = compare((&shape, &pose), (&report.fitted.0, &report.fitted.1)).success();
+            if !success && k != 1 {
+                println!(
+                    "  seed {seed}: {} missed: truth {:.4?}, fit {:.4?}",
+                    variants[k].0,
+                    shape.to_array(),
+                    report.fitted.0.to_array()
+                );
+            }
+            right[k] += success as usize;
             times[k].push(report.timing_ms.total);
         }
     }
