@@ -1,9 +1,10 @@
 //! The two noise models' ceilings: each noisy suite case's stage-2 sample refined from the
 //! true parameters by the grid model (`fit::likelihood`, the default pipeline's polish)
 //! and by the objective of `method=search` (`fit::objective`); how many land within the
-//! suite's tolerances, and their times. With PARTIAL set, single views only.
+//! suite's tolerances, and their times. With PARTIAL set, single views only; with ALL set,
+//! on all of each cloud's points rather than the stage-2 sample.
 //!
-//! `PARTIAL=1 cargo run --release --example objective_ceiling -- [FIRST_SEED] [CASES]`
+//! `ALL=1 PARTIAL=1 cargo run --release --example objective_ceiling -- [FIRST_SEED] [CASES]`
 use std::time::Instant;
 use supertoroid::bench::synthetic::category;
 use supertoroid::eval::Normalization;
@@ -31,7 +32,11 @@ fn main() {
         let all = norm.points(&case.points);
         let mut rng = synth::rng(case_seed);
         let _s1 = synth::subsample(&all, 150, &mut rng);
-        let sample = synth::subsample(&all, 1000, &mut rng);
+        let sample = if std::env::var("ALL").is_ok() {
+            all.clone()
+        } else {
+            synth::subsample(&all, 1000, &mut rng)
+        };
         let truth = norm.candidate(&case.shape, &case.pose);
         let sigma = case.noise * case.shape.size() / norm.scale;
         let viewpoint = case.viewpoint.map(|v| norm.point(v));
