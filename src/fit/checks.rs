@@ -714,13 +714,7 @@ pub(super) fn refit_without_inconsistent_viewpoints(
         }
         results[i] = refit.map(|mut r| {
             r.timing_ms.total = spent;
-            r.warnings.push(format!(
-                "{VIEWPOINT_IGNORED}: {:.0}% of the lines of sight from it to the points pass \
-                 through the object fitted with it (more than {:.0}%), so the sensor was not \
-                 there, or the viewpoint is in another frame than the points; fitted without it",
-                100.0 * violated,
-                100.0 * free_space::MAX_VIOLATED_FRACTION
-            ));
+            r.warnings.push(viewpoint_ignored_warning(violated));
             r
         });
     }

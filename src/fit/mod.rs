@@ -39,6 +39,7 @@ mod inferred_view;
 mod ledger;
 pub mod likelihood;
 pub mod objective;
+mod options;
 mod prepare;
 mod report;
 mod rescue;
@@ -51,6 +52,9 @@ use ablation::Stage;
 pub use checks::*;
 use inferred_view::{inferred, report_viewpoint, with_resolved};
 use ledger::CheckLedger;
+pub use options::{
+    FitOptions, Method, PAPER_A4_REWARD, SHAPE_NAMES, known_with_a3, parse_known_shape,
+};
 use prepare::{Prepared, StartSet, half_extents_about, prepare};
 pub use report::{
     BackendOut, FitReport, Iterations, NOISE_MODEL_WARNING_RATIO, NOISE_WARNING_RATIO,
@@ -69,163 +73,8 @@ use glam::{DMat3, DQuat, DVec3};
 use std::ops::RangeInclusive;
 use std::time::Instant;
 
-/// The a4 reward of the paper's procedure (its stage-2 term for a wider hole).
-pub const PAPER_A4_REWARD: f64 = 1e-4;
-
-/// The shape parameters' names, in their order.
-pub const SHAPE_NAMES: [&str; 6] = ["a1", "a2", "a3", "a4", "eps1", "eps2"];
-
-/// Reads known shape parameters from text, `name=value` pairs separated by commas (`:`
-/// works as well as `=`, for query strings): `"a1=0.05,a4=2.1"` -> a1 and a4 known.
-pub fn parse_known_shape(text: &str) -> Result<[Option<f64>; 6], String> {
-    let mut known = [None; 6];
-    for pair in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let (name, value) = pair
-            .split_once(['=', ':'])
-            .ok_or_else(|| format!("known shape: '{pair}' is not name=value"))?;
-        let i = SHAPE_NAMES
-            .iter()
-            .position(|n| *n == name.trim())
-            .ok_or_else(|| {
-                format!("known shape: '{name}' is not one of a1, a2, a3, a4, eps1, eps2")
-            })?;
-        let value: f64 = value
-            .trim()
-            .parse()
-            .map_err(|_| format!("known shape: '{value}' is not a number"))?;
-        if known[i].replace(value).is_some() {
-            return Err(format!("known shape: {name} given twice"));
-        }
-    }
-    Ok(known)
-}
-
-/// Adds an a3 given on its own (the `a3` option) to known shape parameters; a3 given
-/// both ways is an error.
-pub fn known_with_a3(
-    mut known: [Option<f64>; 6],
-    a3: Option<f64>,
-) -> Result<[Option<f64>; 6], String> {
-    if let Some(a3) = a3 {
-        if known[2].is_some() {
-            return Err("a3 given twice (as a3 and in known)".into());
-        }
-        known[2] = Some(a3);
-    }
-    Ok(known)
-}
-
 /// Fewest points a fit accepts.
 pub const MIN_POINTS: usize = 20;
-
-/// Which pipeline runs.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-    utoipa::ToSchema,
-)]
-#[serde(rename_all = "lowercase")]
-pub enum Method {
-    /// normal-line axis and PCA starts, Huber loss, pruning, a runner-up to stage 2
-    #[default]
-    Default,
-    /// the paper's procedure as a baseline: three starts along the cloud frame's x, y, z
-    /// at the centroid, a3 started at 0.6 of the bounding box half-diagonal, plain least
-    /// squares, the lowest stage-1 cost to stage 2. Stage 1 minimises the meridian
-    /// distance: the paper's top-view cost cannot be rebuilt from its text (the weights
-    /// are unpublished).
-    Paper,
-    /// one bounded search on one objective ([`search`]): least squares from the broad
-    /// start set, the candidates ranked and refined by the noise model's likelihood
-    /// ([`objective`]), no checks after. Not yet the default: on six fresh seed sets in
-    /// the camera's frame it is right on 95.0% of the cases against 97.6% (views 93.0%
-    /// against 97.4%), faster on views and slower on full clouds (`docs/fit.md`)
-    Search,
-}
-
-#[derive(Clone, Debug)]
-pub struct FitOptions {
-    pub method: Method,
-    pub seed: u64,
-    pub stage1_points: usize,
-    pub stage2_points: usize,
-    /// weight of the paper's a4 reward in stage 2 (per point, in normalised units), for
-    /// the default method; `Method::Paper` always uses [`PAPER_A4_REWARD`]. Off by
-    /// default: on the 180-case ground-truth suite 1e-4 lowered the success rate from
-    /// 56% to 49%, on full clouds (78% -> 71%) and single-view partial ones (34% -> 28%)
-    /// alike, and it cost the paper's pot its coverage (a4 pushed past the hole's edge).
-    pub a4_reward: f64,
-    /// between stage-2 finalists, the one with the lower cost - w·a4·points wins: a
-    /// partial view that a hole-less blob explains about as well as a ring goes to the
-    /// ring (the paper's reason for its reward), without the reward's bias on each fit.
-    /// The paper's 1e-4: on its pot, 1 seed in 10 otherwise chose a blob (a4 = 0.1).
-    pub hole_preference: f64,
-    /// weight of the a3 penalty in stage 2 (favours the thinnest section the data allow)
-    pub a3_penalty: f64,
-    /// a stage-1 runner-up with another hole axis goes on to stage 2 when its cost is
-    /// within this factor of the best's
-    pub runner_up_ratio: f64,
-    /// Huber threshold of both stages, as a fraction of the cloud's RMS radius
-    pub huber: f64,
-    /// the chosen stage-2 solution is refined under a Cauchy loss whose scale is this
-    /// many robust residual scales (1.4826 · median |r| at the solution); 0 turns the
-    /// refinement off (see `refine_robustly` in this module).
-    pub refine_scale: f64,
-    pub eps_min: f64,
-    pub eps_max: f64,
-    /// prior: the hole axis in world coordinates, if known (e.g. "on a table, hole up")
-    pub known_axis: Option<DVec3>,
-    /// prior: shape parameters known in advance (a product's dimensions), in the order
-    /// a1 a2 a3 a4 eps1 eps2, sizes in world units; each one given is held fixed. A
-    /// one-sided view cannot tell how thick an object is, nor how wide its hole; a
-    /// catalogue can. See [`parse_known_shape`] for the text form.
-    pub known_shape: [Option<f64>; 6],
-    /// where the depth sensor that saw the cloud was (world units; the origin for a cloud
-    /// in the camera's own frame). The space between it and every point is empty, so a
-    /// candidate that puts solid there pays for it (see [`free_space`]).
-    pub viewpoint: Viewpoint,
-    /// how many other downsampling seeds to try when, with a viewpoint, the fit leaves
-    /// most of its visible surface without points, or the fit stays off a precise cloud
-    /// (then up to [`PRECISE_MISFIT_RETRIES`] where these leave it there; see
-    /// `retry_unseen_surfaces` in this module); 0 turns the retries off, the paper's
-    /// method never retries
-    pub unseen_surface_retries: u64,
-    /// a fit whose noise is at least [`LIKELIHOOD_NOISE_RATIO`] of its thinnest half-axis
-    /// ([`LIKELIHOOD_VIEW_NOISE_RATIO`] with a viewpoint) is polished to the
-    /// maximum-likelihood surface of a model of the noise (and, with a viewpoint, of what
-    /// the sensor saw; see [`likelihood`]); with a viewpoint, a fit that the points do not
-    /// cover even after the retries is refined by the model from collapsed starts too
-    /// (`rescue_unseen_surface`); the paper's method never is
-    pub noise_model: bool,
-    /// with a viewpoint and the noise model: every single view noisy enough for the model
-    /// ([`LIKELIHOOD_VIEW_NOISE_RATIO`]) is retried like an uncovered one, and of the
-    /// covered fits the most likely under the model stands (see
-    /// `retry_unseen_surfaces`; without it, only the views whose fit is just covered,
-    /// [`MARGINAL_COVERAGE`]). Measured on the ground-truth suite: 508 -> 514 of 540
-    /// within tolerance, the single views' median time 73-80 -> 289-306 ms (510 -> 516
-    /// since the other reading of the top view, [`starts::turned_dual`]); off by default
-    pub thorough: bool,
-    /// a fit the noise model refined is refined by it once more at the end, on up to this
-    /// many of the cloud's points (all of them where the cloud has fewer), and its top
-    /// view read both ways again (see `polish_on_more_points` in this module); 0 turns
-    /// it off
-    pub polish_points: usize,
-    /// optional stages left out, for ablations ([`ablation`]); empty for every caller
-    /// but the benchmarks
-    pub skip: Vec<ablation::Stage>,
-    /// the checks of the finished fit (retries, rescues, the last polish) start on a
-    /// cloud only while its time so far is under this many milliseconds; the first fit
-    /// always completes. A check left out for it is named in `timing_ms.over_budget`.
-    /// None (the default): no budget, and the fit does not depend on the machine's speed.
-    pub time_budget_ms: Option<f64>,
-}
 
 /// The noise (first-order Euclidean sigma over the smallest of a1, a2, a3) from which a
 /// fit without a viewpoint goes through [`likelihood::refine`]. (At 0.05 the full clouds
@@ -285,34 +134,6 @@ pub const LIKELIHOOD_OUTLIER_WEIGHT: f64 = 0.05;
 /// Points of the stage-2 sample whose distances tell whether a fit is noisy enough for
 /// the noise model (a quick look; the report's estimate uses more).
 const NOISE_CHECK_SAMPLE: usize = 250;
-
-impl Default for FitOptions {
-    fn default() -> Self {
-        Self {
-            method: Method::Default,
-            seed: 0,
-            stage1_points: 150,
-            stage2_points: 1000,
-            a4_reward: 0.0,
-            hole_preference: PAPER_A4_REWARD,
-            a3_penalty: 0.0,
-            runner_up_ratio: 1.3,
-            huber: 0.05,
-            refine_scale: 1.5,
-            eps_min: 0.1,
-            eps_max: DEFAULT_EPS_MAX,
-            known_axis: None,
-            known_shape: [None; 6],
-            viewpoint: Viewpoint::Auto,
-            unseen_surface_retries: UNSEEN_SURFACE_RETRIES,
-            noise_model: true,
-            thorough: false,
-            polish_points: POLISH_POINTS,
-            skip: Vec::new(),
-            time_budget_ms: None,
-        }
-    }
-}
 
 #[derive(Clone, Debug, thiserror::Error, PartialEq)]
 pub enum FitError {
@@ -384,14 +205,6 @@ pub fn principal_axes(points: &[DVec3]) -> (DMat3, DVec3) {
     (axes, sigma)
 }
 
-impl FitOptions {
-    /// The solver's box in the normalised frame (the cloud's RMS radius is 1): sizes in
-    /// [1e-3, 10], a4 up to 8, eps in [eps_min, eps_max].
-    pub fn bounds(&self) -> Bounds {
-        Bounds::new(1e-3, 10.0, 8.0, self.eps_min, self.eps_max)
-    }
-}
-
 /// Fits one supertoroid to a cloud (world units in, world units out).
 pub fn fit(
     evaluator: &mut dyn Evaluator,
@@ -431,42 +244,10 @@ pub fn fit_batch(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
-    let searched = |o: &FitOptions| o.method == Method::Search;
-    if clouds.iter().any(|(_, o)| searched(o)) {
-        // the searched clouds and the others in two batches, answered in the callers' order
-        let (search, checked): (Vec<_>, Vec<_>) =
-            (0..clouds.len()).partition(|&i| searched(clouds[i].1));
-        let pick = |indices: &[usize]| indices.iter().map(|&i| clouds[i]).collect::<Vec<_>>();
-        let mut answers: Vec<Option<Result<FitReport, FitError>>> =
-            (0..clouds.len()).map(|_| None).collect();
-        let found = fit_batch_searched(evaluator, &pick(&search))?;
-        for (i, r) in search.into_iter().zip(found) {
-            answers[i] = Some(r);
-        }
-        if !checked.is_empty() {
-            let found = fit_batch(evaluator, &pick(&checked))?;
-            for (i, r) in checked.into_iter().zip(found) {
-                answers[i] = Some(r);
-            }
-        }
-        return Ok(answers
-            .into_iter()
-            .map(|r| r.expect("one answer per cloud"))
-            .collect());
+    if clouds.iter().any(|(_, o)| o.method == Method::Search) {
+        return search::batch::fit_batch_by_method(evaluator, clouds);
     }
-    let mut resolved: Vec<(FitOptions, ViewpointUsed)> = clouds
-        .iter()
-        .map(|(points, o)| {
-            let (viewpoint, used) = viewpoint::resolve(o.viewpoint, points);
-            (
-                FitOptions {
-                    viewpoint,
-                    ..(*o).clone()
-                },
-                used,
-            )
-        })
-        .collect();
+    let mut resolved = resolve_viewpoints(clouds);
     let mut results = fit_batch_once(evaluator, &with_resolved(clouds, &resolved))?;
     let first_timing: Vec<Timing> = results
         .iter()
@@ -492,15 +273,7 @@ pub fn fit_batch(
     for i in all_round {
         let (options, used) = &mut resolved[i];
         options.viewpoint = Viewpoint::None;
-        *used = ViewpointUsed {
-            position: None,
-            source: ViewpointSource::None,
-            reason: format!(
-                "{}, but the points are more likely spread all round the object than seen \
-                 from there: fitted as a view from nowhere",
-                used.reason
-            ),
-        };
+        *used = used.dropped(ALL_ROUND);
     }
     let clouds = with_resolved(clouds, &resolved);
     let clouds = clouds.as_slice();
@@ -561,16 +334,10 @@ pub fn fit_batch(
     Ok(results)
 }
 
-/// [`fit_batch`] by one bounded search ([`search`]). Each cloud's viewpoint is resolved
-/// first; a cloud whose viewpoint was only inferred (the frame's origin) is searched
-/// both as a view from there and as a view from nowhere, in the same lockstep batch, and
-/// the fit more likely under its own reading of the cloud stands. A given viewpoint that
-/// the fit contradicts is dropped with a warning and the cloud searched again.
-fn fit_batch_searched(
-    evaluator: &mut dyn Evaluator,
-    clouds: &[(&[DVec3], &FitOptions)],
-) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
-    let mut resolved: Vec<(FitOptions, ViewpointUsed)> = clouds
+/// Each cloud's options with its viewpoint resolved ([`viewpoint::resolve`]), and what
+/// was used and why.
+fn resolve_viewpoints(clouds: &[(&[DVec3], &FitOptions)]) -> Vec<(FitOptions, ViewpointUsed)> {
+    clouds
         .iter()
         .map(|(points, o)| {
             let (viewpoint, used) = viewpoint::resolve(o.viewpoint, points);
@@ -582,183 +349,26 @@ fn fit_batch_searched(
                 used,
             )
         })
-        .collect();
-    // the inferred views' other reading, searched beside them
-    let nowhere: Vec<(usize, FitOptions)> = resolved
-        .iter()
-        .enumerate()
-        .filter(|(_, (o, _))| inferred(o))
-        .map(|(i, (o, _))| {
-            (
-                i,
-                FitOptions {
-                    viewpoint: Viewpoint::None,
-                    ..o.clone()
-                },
-            )
-        })
-        .collect();
-    let mut batch = with_resolved(clouds, &resolved);
-    batch.extend(nowhere.iter().map(|(i, o)| (clouds[*i].0, o)));
-    let twins: Vec<(usize, usize)> = nowhere
-        .iter()
-        .enumerate()
-        .map(|(k, (i, _))| (*i, clouds.len() + k))
-        .collect();
-    let (mut results, dropped) = searched_once(evaluator, &batch, &twins)?;
-    let others = results.split_off(clouds.len());
-    for (k, ((i, options), other)) in nowhere.iter().zip(others).enumerate() {
-        let (Ok(view), Ok(other)) = (&results[*i], other) else {
-            continue;
-        };
-        let viewpoint = resolved[*i]
-            .0
-            .viewpoint
-            .position()
-            .expect("an inferred viewpoint");
-        let test = search::ViewTest::new(clouds[*i].0, viewpoint, options.stage2_points);
-        // (negative log-likelihoods: lower is likelier)
-        let all_round = match (dropped[*i], dropped[clouds.len() + k]) {
-            (true, _) => true,
-            (_, true) => false,
-            _ => test.score(&other, false) < test.score(view, true),
-        };
-        if all_round {
-            let used = &mut resolved[*i].1;
-            *used = ViewpointUsed {
-                position: None,
-                source: ViewpointSource::None,
-                reason: format!(
-                    "{}, but the points are more likely spread all round the object than \
-                     seen from there: fitted as a view from nowhere",
-                    used.reason
-                ),
-            };
-            results[*i] = Ok(other);
-        }
-    }
-    // a given viewpoint the fit contradicts goes: those clouds again without it
-    let contradicted: Vec<(usize, f64)> = results
-        .iter()
-        .enumerate()
-        .filter_map(|(i, r)| {
-            let violated = r.as_ref().ok()?.free_space_violation?;
-            (violated > free_space::MAX_VIOLATED_FRACTION && !inferred(&resolved[i].0))
-                .then_some((i, violated))
-        })
-        .collect();
-    if !contradicted.is_empty() {
-        let started = Instant::now();
-        let options: Vec<FitOptions> = contradicted
-            .iter()
-            .map(|&(i, _)| FitOptions {
-                viewpoint: Viewpoint::None,
-                ..resolved[i].0.clone()
-            })
-            .collect();
-        let batch: Vec<(&[DVec3], &FitOptions)> = contradicted
-            .iter()
-            .zip(&options)
-            .map(|(&(i, _), o)| (clouds[i].0, o))
-            .collect();
-        let (refits, _) = searched_once(evaluator, &batch, &[])?;
-        let waited = started.elapsed().as_secs_f64() * 1e3;
-        for (&(i, violated), refit) in contradicted.iter().zip(refits) {
-            let spent = results[i].as_ref().map_or(0.0, |r| r.timing_ms.total) + waited;
-            let warning = format!(
-                "{VIEWPOINT_IGNORED}: {:.0}% of the lines of sight from it to the points pass \
-                 through the object fitted with it (more than {:.0}%), so the sensor was not \
-                 there, or the viewpoint is in another frame than the points; fitted without it",
-                100.0 * violated,
-                100.0 * free_space::MAX_VIOLATED_FRACTION
-            );
-            let used = &mut resolved[i].1;
-            *used = ViewpointUsed {
-                position: None,
-                source: ViewpointSource::None,
-                reason: format!("{}, but {warning}", used.reason),
-            };
-            results[i] = refit.map(|mut r| {
-                r.timing_ms.total = spent;
-                r.warnings.push(warning);
-                r
-            });
-        }
-    }
-    for (r, (_, used)) in results.iter_mut().zip(resolved) {
-        if let Ok(r) = r {
-            r.viewpoint = used;
-        }
-    }
-    Ok(results)
-}
-
-/// Every cloud prepared, grouped by solver settings, searched and reported; `twins` are
-/// pairs of clouds that are one cloud in two readings (see [`search::TWIN_MARGIN`]).
-/// With the clouds whose search went no further than round 2 for their twin.
-#[allow(clippy::type_complexity)]
-fn searched_once(
-    evaluator: &mut dyn Evaluator,
-    clouds: &[(&[DVec3], &FitOptions)],
-    twins: &[(usize, usize)],
-) -> Result<(Vec<Result<FitReport, FitError>>, Vec<bool>), FitError> {
-    let mut dropped = vec![false; clouds.len()];
-    let start = Instant::now();
-    let mut results: Vec<Option<Result<FitReport, FitError>>> =
-        (0..clouds.len()).map(|_| None).collect();
-    let mut groups: Vec<Vec<(usize, Prepared)>> = Vec::new();
-    for (i, (points, o)) in clouds.iter().enumerate() {
-        match prepare(points, o, StartSet::Broad) {
-            Ok(p) => match groups.iter_mut().find(|g| {
-                let q = &g[0].1;
-                (q.bounds, q.opts1, q.opts2) == (p.bounds, p.opts1, p.opts2)
-            }) {
-                Some(g) => g.push((i, p)),
-                None => groups.push(vec![(i, p)]),
-            },
-            Err(e) => results[i] = Some(Err(e)),
-        }
-    }
-    for group in groups {
-        let local = |i: usize| group.iter().position(|(j, _)| *j == i);
-        let local_twins: Vec<(usize, usize)> = twins
-            .iter()
-            .filter_map(|&(a, b)| Some((local(a)?, local(b)?)))
-            .collect();
-        let found = search::search_group(evaluator, &group, &local_twins)?;
-        for ((i, p), f) in group.iter().zip(found) {
-            dropped[*i] = f.dropped;
-            let best = &f.best;
-            let mut r = report(
-                p,
-                &best.candidate,
-                best.iterations,
-                best.modelled.then_some(best.sigma),
-                f.stage1_iterations,
-                evaluator,
-            );
-            r.noise_modelled = best.modelled;
-            r.timing_ms = Timing {
-                stage1: f.round1_ms,
-                stage2: f.round2_ms + f.finalists_ms,
-                noise_model: f.finalists_ms,
-                total: start.elapsed().as_secs_f64() * 1e3,
-                ..Default::default()
-            };
-            results[*i] = Some(Ok(r));
-        }
-    }
-    Ok((
-        results
-            .into_iter()
-            .map(|r| r.expect("every cloud has a result"))
-            .collect(),
-        dropped,
-    ))
+        .collect()
 }
 
 /// The start of the warning of a viewpoint the fit found contradicted by its points.
 pub const VIEWPOINT_IGNORED: &str = "viewpoint ignored";
+
+/// The warning of a viewpoint that a share `violated` of the lines of sight contradicts.
+fn viewpoint_ignored_warning(violated: f64) -> String {
+    format!(
+        "{VIEWPOINT_IGNORED}: {:.0}% of the lines of sight from it to the points pass \
+         through the object fitted with it (more than {:.0}%), so the sensor was not \
+         there, or the viewpoint is in another frame than the points; fitted without it",
+        100.0 * violated,
+        100.0 * free_space::MAX_VIOLATED_FRACTION
+    )
+}
+
+/// Why an inferred viewpoint is dropped for a view from nowhere.
+const ALL_ROUND: &str = "the points are more likely spread all round the object than \
+                          seen from there: fitted as a view from nowhere";
 
 /// [`fit_batch`] without its checks of the finished fits.
 fn fit_batch_once(

@@ -74,6 +74,17 @@ pub struct ViewpointUsed {
     pub reason: String,
 }
 
+impl ViewpointUsed {
+    /// The viewpoint dropped for a view from nowhere, `why` added to the reason.
+    pub fn dropped(&self, why: &str) -> Self {
+        Self {
+            position: None,
+            source: ViewpointSource::None,
+            reason: format!("{}, but {why}", self.reason),
+        }
+    }
+}
+
 /// Points the test of [`view_from_origin`] looks at (an even stride through the cloud).
 const TEST_POINTS: usize = 4000;
 /// Share of the points that may lie beside or behind the origin (outliers).

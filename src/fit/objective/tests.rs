@@ -88,6 +88,19 @@ fn the_density_integrates_to_one() {
     }
 }
 
+/// The normaliser of a shape at the origin, without a sensor.
+fn plain_normaliser(shape: &Shape) -> normaliser::Normaliser {
+    normaliser::normaliser(
+        shape,
+        DQuat::IDENTITY,
+        DVec3::ZERO,
+        None,
+        normaliser::FINE,
+        None,
+        false,
+    )
+}
+
 fn gradient_matches_differences(shape: Shape, sensor: bool) {
     let pose = Pose::new(
         DQuat::from_scaled_axis(DVec3::new(0.3, -0.2, 0.5)),
@@ -206,15 +219,7 @@ fn the_tables_and_the_normaliser_agree_on_the_area() {
             area
         };
         let area = table_area(0.01);
-        let n = normaliser::normaliser(
-            &shape,
-            DQuat::IDENTITY,
-            DVec3::ZERO,
-            None,
-            normaliser::FINE,
-            None,
-            false,
-        );
+        let n = plain_normaliser(&shape);
         assert!(
             (area / n.area - 1.0).abs() < 0.01,
             "{shape:?}: tables {area}, grid {}",
@@ -237,15 +242,7 @@ fn the_window_misses_nothing() {
     ] {
         let sigma = 0.03;
         let grid = Grid::for_shape(&shape, sigma);
-        let n = normaliser::normaliser(
-            &shape,
-            DQuat::IDENTITY,
-            DVec3::ZERO,
-            None,
-            normaliser::FINE,
-            None,
-            false,
-        );
+        let n = plain_normaliser(&shape);
         let window = Window::new(&grid, &shape, sigma, &n);
         let points = cloud(shape, Pose::default(), 300, 1.5 * sigma, rng.random());
         let mut worst: f64 = 0.0;

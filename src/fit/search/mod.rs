@@ -25,6 +25,8 @@
 //! does not: a surface shown to the sensor without points on it, noise that blurs a thin
 //! section, outliers.
 
+pub(super) mod batch;
+
 use super::*;
 use crate::eval::Normalization;
 use crate::fit::objective::{self, Data, Sensor};
@@ -321,22 +323,15 @@ pub(super) fn search_group(
     let scored1 = scored(evaluator, &live, &live_sets, &sample_refs, group)?;
     let stage1_iterations: Vec<usize> = (0..group.len())
         .map(|cloud| {
-            live.iter()
-                .zip(&live_sets)
-                .filter(|(_, s)| **s == cloud)
-                .map(|(s, _)| s.iterations)
+            of_cloud(&live, &live_sets, cloud)
+                .map(|s| s.iterations)
                 .max()
                 .unwrap_or(0)
         })
         .collect();
     let kept1: Vec<Vec<Scored>> = (0..group.len())
         .map(|cloud| {
-            let own: Vec<Scored> = scored1
-                .iter()
-                .zip(&live_sets)
-                .filter(|(_, s)| **s == cloud)
-                .map(|(c, _)| *c)
-                .collect();
+            let own = of_cloud(&scored1, &live_sets, cloud).copied().collect();
             most_likely_distinct(own, ROUND1_KEPT)
         })
         .collect();
@@ -431,12 +426,7 @@ pub(super) fn search_group(
         let scored2 = scored(evaluator, &solutions, &sets, &sample_refs, group)?;
         for &cloud in &precise {
             let p = &group[cloud].1;
-            let own: Vec<Scored> = scored2
-                .iter()
-                .zip(&sets)
-                .filter(|(_, s)| **s == cloud)
-                .map(|(c, _)| *c)
-                .collect();
+            let own = of_cloud(&scored2, &sets, cloud).copied().collect();
             let mut refined = Vec::new();
             for c in most_likely_distinct(own, 2) {
                 refined.push(robust_candidate(evaluator, p, &mids[cloud], cloud, c, 0)?);
@@ -552,6 +542,15 @@ pub(super) fn search_group(
         f.finalists_ms = (t3 - t2).as_secs_f64() * 1e3;
     }
     Ok(found)
+}
+
+/// The items of a batch that belong to `cloud` (`sets`: each item's cloud).
+fn of_cloud<'a, T>(items: &'a [T], sets: &'a [usize], cloud: usize) -> impl Iterator<Item = &'a T> {
+    items
+        .iter()
+        .zip(sets)
+        .filter(move |(_, s)| **s == cloud)
+        .map(|(item, _)| item)
 }
 
 /// The most likely of a cloud's refined finalists.

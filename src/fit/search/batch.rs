@@ -1,0 +1,197 @@
+//! The search for a batch of clouds: their viewpoints resolved, a cloud whose viewpoint
+//! was only inferred searched in both readings, a given viewpoint the fit contradicts
+//! dropped, the groups of clouds that share solver settings searched ([`search_group`])
+//! and reported.
+
+use super::*;
+
+/// [`fit_batch`] for a batch holding clouds for `Method::Search`: those searched, the
+/// others fitted by their own method, the answers in the callers' order.
+pub(in crate::fit) fn fit_batch_by_method(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
+    let (searched, others): (Vec<usize>, Vec<usize>) =
+        (0..clouds.len()).partition(|&i| clouds[i].1.method == Method::Search);
+    let pick = |indices: &[usize]| indices.iter().map(|&i| clouds[i]).collect::<Vec<_>>();
+    let mut answers: Vec<Option<Result<FitReport, FitError>>> =
+        (0..clouds.len()).map(|_| None).collect();
+    let found = fit_batch_searched(evaluator, &pick(&searched))?;
+    for (i, r) in searched.into_iter().zip(found) {
+        answers[i] = Some(r);
+    }
+    if !others.is_empty() {
+        let found = fit_batch(evaluator, &pick(&others))?;
+        for (i, r) in others.into_iter().zip(found) {
+            answers[i] = Some(r);
+        }
+    }
+    Ok(answers
+        .into_iter()
+        .map(|r| r.expect("one answer per cloud"))
+        .collect())
+}
+
+/// [`fit_batch`] by one bounded search ([`super`]). Each cloud's viewpoint is resolved
+/// first; a cloud whose viewpoint was only inferred (the frame's origin) is searched
+/// both as a view from there and as a view from nowhere, in the same lockstep batch, and
+/// the fit more likely under its own reading of the cloud stands. A given viewpoint that
+/// the fit contradicts is dropped with a warning and the cloud searched again.
+fn fit_batch_searched(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
+    let mut resolved = resolve_viewpoints(clouds);
+    // the inferred views' other reading, searched beside them
+    let nowhere: Vec<(usize, FitOptions)> = resolved
+        .iter()
+        .enumerate()
+        .filter(|(_, (o, _))| inferred(o))
+        .map(|(i, (o, _))| {
+            (
+                i,
+                FitOptions {
+                    viewpoint: Viewpoint::None,
+                    ..o.clone()
+                },
+            )
+        })
+        .collect();
+    let mut batch = with_resolved(clouds, &resolved);
+    batch.extend(nowhere.iter().map(|(i, o)| (clouds[*i].0, o)));
+    let twins: Vec<(usize, usize)> = nowhere
+        .iter()
+        .enumerate()
+        .map(|(k, (i, _))| (*i, clouds.len() + k))
+        .collect();
+    let (mut results, dropped) = searched_once(evaluator, &batch, &twins)?;
+    let others = results.split_off(clouds.len());
+    for (k, ((i, options), other)) in nowhere.iter().zip(others).enumerate() {
+        let (Ok(view), Ok(other)) = (&results[*i], other) else {
+            continue;
+        };
+        let viewpoint = resolved[*i]
+            .0
+            .viewpoint
+            .position()
+            .expect("an inferred viewpoint");
+        let test = ViewTest::new(clouds[*i].0, viewpoint, options.stage2_points);
+        // (negative log-likelihoods: lower is likelier)
+        let all_round = match (dropped[*i], dropped[clouds.len() + k]) {
+            (true, _) => true,
+            (_, true) => false,
+            _ => test.score(&other, false) < test.score(view, true),
+        };
+        if all_round {
+            resolved[*i].1 = resolved[*i].1.dropped(ALL_ROUND);
+            results[*i] = Ok(other);
+        }
+    }
+    // a given viewpoint the fit contradicts goes: those clouds again without it
+    let contradicted: Vec<(usize, f64)> = results
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            let violated = r.as_ref().ok()?.free_space_violation?;
+            (violated > free_space::MAX_VIOLATED_FRACTION && !inferred(&resolved[i].0))
+                .then_some((i, violated))
+        })
+        .collect();
+    if !contradicted.is_empty() {
+        let started = Instant::now();
+        let options: Vec<FitOptions> = contradicted
+            .iter()
+            .map(|&(i, _)| FitOptions {
+                viewpoint: Viewpoint::None,
+                ..resolved[i].0.clone()
+            })
+            .collect();
+        let batch: Vec<(&[DVec3], &FitOptions)> = contradicted
+            .iter()
+            .zip(&options)
+            .map(|(&(i, _), o)| (clouds[i].0, o))
+            .collect();
+        let (refits, _) = searched_once(evaluator, &batch, &[])?;
+        let waited = started.elapsed().as_secs_f64() * 1e3;
+        for (&(i, violated), refit) in contradicted.iter().zip(refits) {
+            let spent = results[i].as_ref().map_or(0.0, |r| r.timing_ms.total) + waited;
+            let warning = viewpoint_ignored_warning(violated);
+            resolved[i].1 = resolved[i].1.dropped(&warning);
+            results[i] = refit.map(|mut r| {
+                r.timing_ms.total = spent;
+                r.warnings.push(warning);
+                r
+            });
+        }
+    }
+    for (r, (_, used)) in results.iter_mut().zip(resolved) {
+        if let Ok(r) = r {
+            r.viewpoint = used;
+        }
+    }
+    Ok(results)
+}
+
+/// Every cloud prepared, grouped by solver settings, searched and reported; `twins` are
+/// pairs of clouds that are one cloud in two readings (see [`TWIN_MARGIN`]).
+/// With the clouds whose search went no further than round 2 for their twin.
+#[allow(clippy::type_complexity)]
+fn searched_once(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+    twins: &[(usize, usize)],
+) -> Result<(Vec<Result<FitReport, FitError>>, Vec<bool>), FitError> {
+    let mut dropped = vec![false; clouds.len()];
+    let start = Instant::now();
+    let mut results: Vec<Option<Result<FitReport, FitError>>> =
+        (0..clouds.len()).map(|_| None).collect();
+    let mut groups: Vec<Vec<(usize, Prepared)>> = Vec::new();
+    for (i, (points, o)) in clouds.iter().enumerate() {
+        match prepare(points, o, StartSet::Broad) {
+            Ok(p) => match groups.iter_mut().find(|g| {
+                let q = &g[0].1;
+                (q.bounds, q.opts1, q.opts2) == (p.bounds, p.opts1, p.opts2)
+            }) {
+                Some(g) => g.push((i, p)),
+                None => groups.push(vec![(i, p)]),
+            },
+            Err(e) => results[i] = Some(Err(e)),
+        }
+    }
+    for group in groups {
+        let local = |i: usize| group.iter().position(|(j, _)| *j == i);
+        let local_twins: Vec<(usize, usize)> = twins
+            .iter()
+            .filter_map(|&(a, b)| Some((local(a)?, local(b)?)))
+            .collect();
+        let found = search_group(evaluator, &group, &local_twins)?;
+        for ((i, p), f) in group.iter().zip(found) {
+            dropped[*i] = f.dropped;
+            let best = &f.best;
+            let mut r = report(
+                p,
+                &best.candidate,
+                best.iterations,
+                best.modelled.then_some(best.sigma),
+                f.stage1_iterations,
+                evaluator,
+            );
+            r.noise_modelled = best.modelled;
+            r.timing_ms = Timing {
+                stage1: f.round1_ms,
+                stage2: f.round2_ms + f.finalists_ms,
+                noise_model: f.finalists_ms,
+                total: start.elapsed().as_secs_f64() * 1e3,
+                ..Default::default()
+            };
+            results[*i] = Some(Ok(r));
+        }
+    }
+    Ok((
+        results
+            .into_iter()
+            .map(|r| r.expect("every cloud has a result"))
+            .collect(),
+        dropped,
+    ))
+}
