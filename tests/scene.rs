@@ -218,3 +218,128 @@ fn a_box_seen_from_above_filling_the_box_keeps_its_top() {
     let pixels = back_project_pixels(&view.depth, &options(&camera, roi), None).unwrap();
     assert!(matches!(remove_table(&pixels, 0), TableOutcome::NoTable));
 }
+
+/// Gaussian noise along each point's ray from the camera at the origin, growing with the
+/// square of the range as a stereo sensor's does (sigma 2 mm at 1 m).
+fn with_ray_noise(points: &[DVec3], seed: u64) -> Vec<DVec3> {
+    use rand_distr::{Distribution, Normal};
+    let mut rng = synth::rng(seed);
+    let unit = Normal::new(0.0, 1.0).unwrap();
+    points
+        .iter()
+        .map(|&p| {
+            let range = p.length();
+            p + p / range * (0.002 * range * range * unit.sample(&mut rng))
+        })
+        .collect()
+}
+
+#[test]
+fn a_cloud_of_bare_table_is_refused_and_the_object_beside_it_is_fitted() {
+    use serde_json::{Value, json};
+    let shape = Shape::new(0.02, 0.02, 0.012, 2.2, 0.8, 1.0);
+    let (depth, camera, roi, _) = table_frame(shape, DVec3::ZERO);
+    let bare = Roi {
+        x: roi.x + roi.width as i64 + 20,
+        ..roi
+    };
+    let cloud_of = |roi: Roi| {
+        let pixels = back_project_pixels(&depth, &options(&camera, roi), None).unwrap();
+        with_ray_noise(&pixels.points, 5)
+    };
+    let table_patch = cloud_of(bare);
+    let object = match remove_table(
+        &back_project_pixels(&depth, &options(&camera, roi), None).unwrap(),
+        0,
+    ) {
+        TableOutcome::Removed { object, .. } => with_ray_noise(&object, 6),
+        other => panic!("the object's box holds the object: {other:?}"),
+    };
+    let server = common::Server::start(supertoroid::service::ServiceConfig {
+        backend: supertoroid::eval::Backend::Cpu,
+        ..Default::default()
+    });
+    let post = |points: &[DVec3]| {
+        let points: Vec<[f64; 3]> = points.iter().map(|p| p.to_array()).collect();
+        common::client()
+            .post(server.url("/v1/fit"))
+            .json(&json!({ "points": points }))
+            .send()
+            .unwrap()
+    };
+    let r = post(&table_patch);
+    assert_eq!(r.status().as_u16(), 422);
+    let err: Value = r.json().unwrap();
+    assert_eq!(err["error"]["code"], "no_object_found", "{err}");
+    assert!(
+        err["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("one plane"),
+        "{err}"
+    );
+    let r = post(&object);
+    assert_eq!(r.status().as_u16(), 200);
+
+    // the CLI refuses the same patch with exit code 2 and says why
+    let dir = std::env::temp_dir().join(format!("supertoroid-bare-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("table.xyz");
+    let text: String = table_patch
+        .iter()
+        .map(|p| format!("{} {} {}\n", p.x, p.y, p.z))
+        .collect();
+    std::fs::write(&file, text).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_supertoroid"))
+        .args(["fit", file.to_str().unwrap(), "--backend", "cpu"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("no object found"),
+        "{out:?}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_flat_washer_seen_face_on_is_fitted_with_a_note() {
+    // 1500 points on an annulus 16 mm across with an 8 mm hole, 0.4 m in front of the
+    // camera and facing it, with the sensor's noise
+    let mut rng = synth::rng(9);
+    let mut points = Vec::new();
+    while points.len() < 1500 {
+        let (x, y): (f64, f64) = (
+            rng.random_range(-0.008..0.008),
+            rng.random_range(-0.008..0.008),
+        );
+        let r = x.hypot(y);
+        if (0.004..0.008).contains(&r) {
+            points.push(DVec3::new(x, y, 0.4));
+        }
+    }
+    let points = with_ray_noise(&points, 10);
+    let report = supertoroid::fit::fit(
+        &mut supertoroid::eval::CpuEvaluator::new(),
+        &points,
+        &Default::default(),
+    )
+    .unwrap();
+    assert!(
+        report.warnings.iter().any(|w| w.contains("flat ring")),
+        "{:?}",
+        report.warnings
+    );
+    // a ring round the hole: its centre, its axis towards the camera, its mean radius 6 mm
+    let (shape, pose) = report.fitted;
+    assert!(
+        (pose.translation - DVec3::new(0.0, 0.0, 0.4)).length() < 5e-4,
+        "{pose:?}"
+    );
+    assert!(
+        (pose.rotation * DVec3::Z).z.abs() > 5f64.to_radians().cos(),
+        "{pose:?}"
+    );
+    let radius = shape.a4 * 0.5 * (shape.a1 + shape.a2);
+    assert!((radius - 0.006).abs() < 6e-4, "{shape:?}");
+}

@@ -694,7 +694,7 @@ pub(super) fn refit_without_inconsistent_viewpoints(
         .collect();
     let indices: Vec<usize> = contradicted.iter().map(|&(i, _)| i).collect();
     let options = inferred_view::options_without_viewpoint(clouds, &indices);
-    let refits = fit_batch(
+    let refits = fit_batch_unscreened(
         evaluator,
         &inferred_view::batch_of(clouds, &indices, &options),
     )?;

@@ -40,6 +40,7 @@ mod ledger;
 pub mod likelihood;
 pub mod objective;
 mod options;
+pub mod planarity;
 mod prepare;
 mod report;
 mod rescue;
@@ -143,6 +144,8 @@ pub enum FitError {
     NonFinite(usize),
     #[error("the cloud is degenerate ({0}): it has no extent in three directions")]
     Degenerate(&'static str),
+    #[error("no object found: {0}")]
+    NoObject(String),
     #[error("invalid option: {0}")]
     InvalidOption(String),
     #[error("evaluator failed: {0}")]
@@ -240,7 +243,63 @@ pub fn fit(
 /// its `timing_ms` is its group's, since the clouds share every evaluation. The outer
 /// error is the evaluator's (it fails the whole batch); a cloud that cannot be fitted
 /// (too few points, planar, bad options) gets its own error and the others go on.
+///
+/// Before any of it, each cloud is screened for an object ([`planarity`]): points on one
+/// plane within their noise and around no hole get [`FitError::NoObject`].
 pub fn fit_batch(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
+    let screens: Vec<Result<Option<String>, FitError>> = clouds
+        .iter()
+        .map(|(points, o)| screen_for_an_object(points, o.seed))
+        .collect();
+    let objects: Vec<usize> = (0..clouds.len()).filter(|&i| screens[i].is_ok()).collect();
+    let picked: Vec<_> = objects.iter().map(|&i| clouds[i]).collect();
+    let mut fits = if picked.is_empty() {
+        Vec::new()
+    } else if picked.iter().any(|(_, o)| o.method == Method::Search) {
+        search::batch::fit_batch_by_method(evaluator, &picked)?
+    } else {
+        fit_batch_unscreened(evaluator, &picked)?
+    }
+    .into_iter();
+    Ok(screens
+        .into_iter()
+        .map(|screen| {
+            let note = screen?;
+            let mut fit = fits.next().expect("one fit per screened cloud");
+            if let (Ok(r), Some(note)) = (fit.as_mut(), note) {
+                r.warnings.push(note);
+            }
+            fit
+        })
+        .collect())
+}
+
+/// [`FitError::NoObject`] for a bare plane; a note for a flat ring seen face-on.
+fn screen_for_an_object(points: &[DVec3], seed: u64) -> Result<Option<String>, FitError> {
+    use planarity::Planarity;
+    // the checks of `check_cloud` come first, with their own errors
+    check_cloud(points)?;
+    match planarity::planarity(points, seed) {
+        Planarity::Solid => Ok(None),
+        Planarity::FlatRing { share } => Ok(Some(format!(
+            "{:.0}% of the points lie on one plane within their noise, around a hole: a flat \
+             ring seen face-on, whose thickness (a3) the cloud does not show",
+            100.0 * share
+        ))),
+        Planarity::BarePlane { share, tolerance } => Err(FitError::NoObject(format!(
+            "{:.0}% of the points lie on one plane (within {tolerance:.1e} in the cloud's units, three times their \
+             own scatter) and enclose no hole: a bare surface such as a table, or one face \
+             seen head-on, whose depth no fit can tell",
+            100.0 * share
+        ))),
+    }
+}
+
+/// [`fit_batch`] without the screen for an object.
+pub(in crate::fit) fn fit_batch_unscreened(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {

@@ -83,6 +83,7 @@ impl From<FitError> for ApiError {
             FitError::TooFewPoints(_) => "too_few_points",
             FitError::NonFinite(_) => "non_finite",
             FitError::Degenerate(_) => "degenerate_cloud",
+            FitError::NoObject(_) => "no_object_found",
             FitError::InvalidOption(_) => "invalid_option",
             FitError::Evaluator(_) => "evaluator_failed",
         };

@@ -21,7 +21,7 @@ pub(in crate::fit) fn fit_batch_by_method(
         answers[i] = Some(r);
     }
     if !others.is_empty() {
-        let found = fit_batch(evaluator, &pick(&others))?;
+        let found = fit_batch_unscreened(evaluator, &pick(&others))?;
         for (i, r) in others.into_iter().zip(found) {
             answers[i] = Some(r);
         }
