@@ -80,3 +80,22 @@ fn a_manifest_with_an_unknown_field_does_not_validate() {
     assert!(!ok, "{output}");
     assert!(output.contains("targetPortt"), "{output}");
 }
+
+/// schemathesis (PyPI; `.ci/run` installs it) fuzzes the running service against its own
+/// OpenAPI document (`scripts/api-fuzz`: 200 requests an operation from a fixed seed,
+/// about 3,600 in all, half a minute): no 5xx, every response on its schema,
+/// no undocumented status or content type, no schema-invalid request accepted, and no
+/// request that keeps to the document refused for its form. A missing tool fails.
+#[test]
+fn the_service_keeps_to_its_openapi_document_under_schemathesis() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = Command::new(root.join("scripts/api-fuzz"))
+        .arg("200")
+        .env("SUPERTOROID_BIN", env!("CARGO_BIN_EXE_supertoroid"))
+        .output()
+        .unwrap();
+    let text =
+        String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{text}");
+    assert!(text.contains("passed"), "{text}");
+}

@@ -228,6 +228,10 @@ impl Serialize for Viewpoint {
     }
 }
 
+/// The text forms [`parse`] reads, as a regular expression for the OpenAPI document
+/// (numbers of at most 15 digits and a two-digit exponent: finite whatever they are).
+pub const TEXT_PATTERN: &str = r"^ *([Aa][Uu][Tt][Oo]|[Nn][Oo][Nn][Ee]|[-+]?([0-9]{1,15}\.?[0-9]{0,15}|\.[0-9]{1,15})([eE][-+]?[0-9]{1,2})? *, *[-+]?([0-9]{1,15}\.?[0-9]{0,15}|\.[0-9]{1,15})([eE][-+]?[0-9]{1,2})? *, *[-+]?([0-9]{1,15}\.?[0-9]{0,15}|\.[0-9]{1,15})([eE][-+]?[0-9]{1,2})?) *$";
+
 /// The OpenAPI schema of a request's viewpoint: `[x, y, z]` or `"auto"`, `"none"`,
 /// `"x,y,z"`.
 pub fn request_schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
@@ -239,7 +243,11 @@ pub fn request_schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schem
                 .min_items(Some(3))
                 .max_items(Some(3)),
         )
-        .item(ObjectBuilder::new().schema_type(Type::String))
+        .item(
+            ObjectBuilder::new()
+                .schema_type(Type::String)
+                .pattern(Some(TEXT_PATTERN)),
+        )
         .description(Some(
             "[x, y, z] in the cloud's frame, or \"auto\", \"none\", \"x,y,z\"",
         ))

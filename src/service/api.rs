@@ -31,6 +31,7 @@ type Shared = State<Arc<AppState>>;
 /// Fit options a request may give (all optional).
 #[derive(Clone, Debug, Default, Deserialize, Serialize, ToSchema, IntoParams)]
 #[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
 pub struct FitRequestOptions {
     /// seed of the random downsampling (default 0); the same seed gives the same fit
     pub seed: Option<u64>,
@@ -543,7 +544,7 @@ async fn fit_cloud(
     let bytes = read_body(&state, body).await?;
     let mut grasps = None;
     let job = if kind == "application/json" {
-        let request: FitRequest = serde_json::from_slice(&bytes).map_err(ApiError::from_json)?;
+        let request: FitRequest = ApiError::parse_json(&bytes)?;
         let points = points_from_json(&state, &request.points)?;
         grasps = super::geometry::checked_grasp_options(request.options.grasps.clone())?;
         request.options.job(points, state.config.max_points)?
@@ -603,8 +604,7 @@ async fn fit_depth(
     let kind = content_type(request.headers());
     let (params, depth_bytes, mask_bytes) = if kind == "application/json" {
         let bytes = read_body(&state, request.into_body()).await?;
-        let mut params: DepthFitRequest =
-            serde_json::from_slice(&bytes).map_err(ApiError::from_json)?;
+        let mut params: DepthFitRequest = ApiError::parse_json(&bytes)?;
         let decode = |field: &str, v: &Option<String>| -> Result<Option<Vec<u8>>, ApiError> {
             v.as_ref()
                 .map(|s| {
@@ -645,12 +645,7 @@ async fn fit_depth(
             let name = field.name().unwrap_or("").to_owned();
             let data = field.bytes().await.map_err(multipart_error)?;
             match name.as_str() {
-                "params" => {
-                    params = Some(
-                        serde_json::from_slice::<DepthFitRequest>(&data)
-                            .map_err(ApiError::from_json)?,
-                    )
-                }
+                "params" => params = Some(ApiError::parse_json::<DepthFitRequest>(&data)?),
                 "depth" => depth = Some(data.to_vec()),
                 "mask" => mask = Some(data.to_vec()),
                 other => {
@@ -857,7 +852,7 @@ async fn fit_batch(
         ));
     }
     let bytes = read_body(&state, body).await?;
-    let request: BatchRequest = serde_json::from_slice(&bytes).map_err(ApiError::from_json)?;
+    let request: BatchRequest = ApiError::parse_json(&bytes)?;
     if request.clouds.is_empty() {
         return Err(ApiError::unprocessable(
             "invalid_request",
@@ -933,8 +928,8 @@ async fn readyz(State(state): Shared) -> Json<Readiness> {
     Json(state.fitter.readiness())
 }
 
-/// Prometheus metrics (text exposition format).
-#[utoipa::path(get, path = "/metrics", responses((status = 200, content_type = "text/plain")))]
+/// Prometheus metrics (OpenMetrics text format).
+#[utoipa::path(get, path = "/metrics", responses((status = 200, content_type = "application/openmetrics-text")))]
 async fn metrics(State(state): Shared) -> impl IntoResponse {
     // the queue as it is now, not as the last response left it
     state.metrics.queue_depth.set(state.fitter.queued() as i64);
@@ -950,7 +945,7 @@ async fn metrics(State(state): Shared) -> impl IntoResponse {
 /// This document.
 #[utoipa::path(get, path = "/openapi.json", responses((status = 200, content_type = "application/json")))]
 async fn openapi() -> impl IntoResponse {
-    Json(ApiDoc::openapi())
+    Json(super::openapi::document())
 }
 
 /// A short page that says what the service is.

@@ -54,6 +54,24 @@ impl ApiError {
         )
     }
 
+    /// A request body as JSON. A whole number written with a fraction (`640.0`, as
+    /// numpy and JavaScript clients write them; JSON Schema's integer allows it) is taken
+    /// where the request wants an integer: tried only when the body does not read as it
+    /// is, so the usual request pays nothing for it.
+    pub fn parse_json<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+        serde_json::from_slice(bytes).or_else(|first: serde_json::Error| {
+            if first.classify() != serde_json::error::Category::Data {
+                return Err(Self::from_json(first));
+            }
+            let mut value: serde_json::Value =
+                serde_json::from_slice(bytes).map_err(Self::from_json)?;
+            if !integral_floats_to_integers(&mut value) {
+                return Err(Self::from_json(first));
+            }
+            serde_json::from_value(value).map_err(|_| Self::from_json(first))
+        })
+    }
+
     /// From a JSON (de)serialisation failure: syntax is 400, the wrong shape is 422.
     pub fn from_json(e: serde_json::Error) -> Self {
         use serde_json::error::Category;
@@ -61,6 +79,36 @@ impl ApiError {
             Category::Data => Self::unprocessable("invalid_request", e.to_string()),
             _ => Self::bad_request("malformed_json", e.to_string()),
         }
+    }
+}
+
+/// Rewrites each float with a whole value within u64 or i64 as that integer; true where
+/// one was.
+fn integral_floats_to_integers(value: &mut serde_json::Value) -> bool {
+    use serde_json::Value;
+    match value {
+        Value::Number(n) if n.is_f64() => {
+            let read = n.as_f64().unwrap_or(f64::NAN);
+            // serde_json reads a long decimal to within an ulp or so of its value
+            let f = read.round();
+            let whole = (read - f).abs() <= 4.0 * f64::EPSILON * f.abs();
+            // (the casts are exact: a whole double in range is that integer)
+            if whole && (0.0..18_446_744_073_709_551_616.0).contains(&f) {
+                *value = Value::from(f as u64);
+            } else if whole && (-9_223_372_036_854_775_808.0..0.0).contains(&f) {
+                *value = Value::from(f as i64);
+            } else {
+                return false;
+            }
+            true
+        }
+        Value::Array(items) => items
+            .iter_mut()
+            .fold(false, |any, v| integral_floats_to_integers(v) | any),
+        Value::Object(fields) => fields
+            .values_mut()
+            .fold(false, |any, v| integral_floats_to_integers(v) | any),
+        _ => false,
     }
 }
 
@@ -118,3 +166,24 @@ impl IntoResponse for ApiError {
 /// The error code of a response, for metrics.
 #[derive(Clone, Copy, Debug)]
 pub struct ErrorCode(pub &'static str);
+
+#[cfg(test)]
+mod json_tests {
+    use super::*;
+
+    #[derive(serde::Deserialize, Debug)]
+    struct Size {
+        width: u32,
+        scale: f64,
+    }
+
+    #[test]
+    fn a_whole_number_with_a_fraction_reads_as_an_integer_and_a_fraction_does_not() {
+        let size: Size = ApiError::parse_json(br#"{"width": 640.0, "scale": 1.5}"#).unwrap();
+        assert_eq!((size.width, size.scale), (640, 1.5));
+        let refused = ApiError::parse_json::<Size>(br#"{"width": 640.5, "scale": 1}"#).unwrap_err();
+        assert_eq!(refused.code, "invalid_request");
+        let refused = ApiError::parse_json::<Size>(br#"{"width": 640.0"#).unwrap_err();
+        assert_eq!(refused.code, "malformed_json");
+    }
+}

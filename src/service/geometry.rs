@@ -145,7 +145,7 @@ pub async fn surface(
 ) -> Result<Json<SurfaceResponse>, ApiError> {
     json_only(&headers)?;
     let bytes = read_body(&state, body).await?;
-    let request: SurfaceRequest = serde_json::from_slice(&bytes).map_err(ApiError::from_json)?;
+    let request: SurfaceRequest = ApiError::parse_json(&bytes)?;
     let (shape, pose) = request
         .object
         .validated()
@@ -240,7 +240,7 @@ pub async fn grasps(
 ) -> Result<Json<GraspsResponse>, ApiError> {
     json_only(&headers)?;
     let bytes = read_body(&state, body).await?;
-    let request: GraspsRequest = serde_json::from_slice(&bytes).map_err(ApiError::from_json)?;
+    let request: GraspsRequest = ApiError::parse_json(&bytes)?;
     let (shape, pose) = request
         .object
         .object

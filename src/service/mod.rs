@@ -15,6 +15,7 @@ pub mod error;
 pub mod fitter;
 pub mod geometry;
 pub mod metrics;
+pub mod openapi;
 
 pub use config::ServiceConfig;
 
