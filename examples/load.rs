@@ -1,8 +1,8 @@
 //! Load and soak for the service: N concurrent clients post clouds to /v1/fit and depth
 //! frames to /v1/fit/depth, for a number of requests or for a time, and the report gives
 //! fits per second, latency percentiles, every status seen, dropped connections, the
-//! server's resident memory at the start and the end (with SERVER_PID set) and the queue
-//! gauge once the clients are done.
+//! server's resident memory at the start, once a minute and at the end (with SERVER_PID
+//! set) and the queue gauge once the clients are done.
 //!
 //!   cargo run --release --example load -- http://127.0.0.1:8080 4 200 ../shared/clouds/paper/*.pcd
 //!   SERVER_PID=$(pidof supertoroid) cargo run --release --example load -- URL 16 600s depth ../shared/clouds/paper/*.pcd
@@ -97,7 +97,22 @@ fn main() {
     let rss_start = server_rss_mb();
     let next = AtomicUsize::new(0);
     let start = Instant::now();
+    let finished = std::sync::atomic::AtomicBool::new(false);
+    let mut rss_by_minute = Vec::new();
     let results: Vec<(Duration, u16)> = std::thread::scope(|scope| {
+        // the server's memory once a minute while the clients run
+        let sampler = scope.spawn(|| {
+            let mut samples = Vec::new();
+            let mut due = Instant::now();
+            while !finished.load(Ordering::Relaxed) {
+                if Instant::now() >= due {
+                    samples.extend(server_rss_mb().map(f64::round));
+                    due += Duration::from_secs(60);
+                }
+                std::thread::sleep(Duration::from_millis(200));
+            }
+            samples
+        });
         let handles: Vec<_> = (0..concurrency)
             .map(|_| {
                 let (client, next, bodies, url) = (&client, &next, &bodies, &url);
@@ -138,10 +153,13 @@ fn main() {
                 })
             })
             .collect();
-        handles
+        let results = handles
             .into_iter()
             .flat_map(|h| h.join().unwrap())
-            .collect()
+            .collect();
+        finished.store(true, Ordering::Relaxed);
+        rss_by_minute = sampler.join().unwrap();
+        results
     });
     let wall = start.elapsed().as_secs_f64();
     let rss_end = server_rss_mb();
@@ -173,6 +191,7 @@ fn main() {
         "max_ms": ms[ms.len() - 1].round(),
         "rss_mb_start": rss_start.map(f64::round),
         "rss_mb_end": rss_end.map(f64::round),
+        "rss_mb_by_minute": rss_by_minute,
         "queued_after": queued,
     });
     println!("{report}");

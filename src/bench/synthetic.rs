@@ -1,4 +1,4 @@
-//! `bench synthetic`: the ground-truth suite of issue 4. Case i of a set (seed `seed + i`)
+//! `bench synthetic`: the ground-truth suite ([`crate::fit::ground_truth`]). Case i of a set (seed `seed + i`)
 //! falls in category i mod 18: full or single-view partial cloud x noise 0, 1, 2% of the
 //! size x outliers 0, 5, 10%. Success is `ground_truth::Errors::success` (centre 5% of
 //! size, axis 5 degrees, sizes and a4 10%, eps 0.15, up to the symmetries). Several sets

@@ -1,4 +1,4 @@
-//! The ground-truth suite: random supertoroids in the ranges of issue 4, clouds full or
+//! The ground-truth suite: random supertoroids (`make_case`'s ranges), clouds full or
 //! single-view partial, with noise and outliers, and the success rule (centre within 5%
 //! of the size, hole axis within 5 degrees, each a_i within 10%, each eps within 0.15,
 //! up to the shape's symmetries: axis sign, and the a1/a2 swap with a quarter turn).

@@ -1,15 +1,16 @@
 //! The two-stage fit (paper §V), on top of an evaluator and the interior-point solver.
 //!
-//! 1. Check the cloud (finite, enough points, not planar or collinear), normalise it
-//!    (centre, scale) so the device works in f32 on unit-sized numbers.
+//! 1. Check the cloud (finite, enough points, not planar or collinear; an object in it:
+//!    [`planarity`] refuses points on one plane within their noise around no hole),
+//!    normalise it (centre, scale) so the device works in f32 on unit-sized numbers.
 //! 2. Seeded random downsampling: 150 points for stage 1, 1000 for stage 2 (the paper's).
 //! 3. Stage 1: several starts solved as one batch under a Huber loss; the lowest cost
 //!    wins. Six start from the axis that the estimated normal lines meet (see [`starts`]:
 //!    the start that survives single-view clouds), with the hole ratio estimated and
 //!    fixed at 1.3 and 2.5, each at two in-plane turns 45 degrees apart; six more from
-//!    the cloud's principal axes at the centroid (the paper starts from x, y and z). The paper's own stage-1 cost (top-view
-//!    superellipses) was measured to prefer tilted axes (see the issue), so stage 1 here
-//!    already minimises the meridian distance.
+//!    the cloud's principal axes at the centroid (the paper starts from x, y and z). The
+//!    paper's own stage-1 cost (top-view superellipses) prefers tilted axes, so stage 1
+//!    here already minimises the meridian distance.
 //! 4. Stage 2: the winner refined on the stage-2 sample, then once more under a Cauchy
 //!    loss scaled by the cloud's own residual spread (`refine_robustly`); mapped back
 //!    to world units. The paper's a4 reward for partial clouds runs only in
@@ -285,8 +286,8 @@ fn screen_for_an_object(points: &[DVec3], seed: u64) -> Result<Option<String>, F
     match planarity::planarity(points, seed) {
         Planarity::Solid => Ok(None),
         Planarity::FlatRing { share } => Ok(Some(format!(
-            "{:.0}% of the points lie on one plane within their noise, around a hole: a flat \
-             ring seen face-on, whose thickness (a3) the cloud does not show",
+            "flat ring seen face-on: {:.0}% of the points lie on one plane within their \
+             noise, around a hole; the cloud does not show the ring's thickness (a3)",
             100.0 * share
         ))),
         Planarity::BarePlane { share, tolerance } => Err(FitError::NoObject(format!(
