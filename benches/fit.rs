@@ -102,7 +102,7 @@ fn bench_single_view(c: &mut Criterion) {
     let mut evaluators = evaluators();
     let mut group = timed_group(c, "single view", 3);
     // the suite's case 10: single view, noise 1% of the size, no outliers
-    let case = supertoroid::fit::ground_truth::make_case(10_010, true, 0.01, 0.0);
+    let case = supertoroid::suite::ground_truth::make_case(10_010, true, 0.01, 0.0);
     let options = |viewpoint: Option<_>| FitOptions {
         seed: 10_010,
         viewpoint: viewpoint.into(),
@@ -119,7 +119,7 @@ fn bench_single_view(c: &mut Criterion) {
     );
     // the suite's case 63: a noise-free single view whose first fit leaves the surface it
     // shows the camera uncovered, so it is fitted again with three other seeds
-    let uncovered = supertoroid::fit::ground_truth::make_case(10_063, true, 0.0, 0.0);
+    let uncovered = supertoroid::suite::ground_truth::make_case(10_063, true, 0.0, 0.0);
     let options = |unseen_surface_retries| FitOptions {
         seed: 10_063,
         viewpoint: uncovered.viewpoint.into(),
@@ -144,7 +144,7 @@ fn bench_single_view(c: &mut Criterion) {
 fn bench_noise_model(c: &mut Criterion) {
     let mut evaluators = evaluators();
     let mut group = timed_group(c, "noise model", 3);
-    let case = supertoroid::fit::ground_truth::make_case(10_005, false, 0.02, 0.05);
+    let case = supertoroid::suite::ground_truth::make_case(10_005, false, 0.02, 0.05);
     let options = |noise_model| FitOptions {
         seed: 10_005,
         noise_model,
@@ -162,7 +162,7 @@ fn bench_noise_model(c: &mut Criterion) {
     // case 10 of seed set 20000: a single view (noise 1% of the size, 0.12 of the
     // thinnest half-axis) whose fit and retries grow a body into the unseen side; the
     // noise model rescues it (sizes 2.4 times the truth -> within 1%)
-    let grown = supertoroid::fit::ground_truth::make_case(20_010, true, 0.01, 0.0);
+    let grown = supertoroid::suite::ground_truth::make_case(20_010, true, 0.01, 0.0);
     let options = |noise_model| FitOptions {
         seed: 20_010,
         viewpoint: grown.viewpoint.into(),

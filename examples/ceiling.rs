@@ -8,9 +8,9 @@
 
 use supertoroid::bench::synthetic::{DEFAULT_SEED, category};
 use supertoroid::eval::{CpuEvaluator, Evaluator, Loss, Normalization};
-use supertoroid::fit::ground_truth::{compare, make_case};
 use supertoroid::fit::{FitOptions, fit};
 use supertoroid::solve::{SolverOptions, solve};
+use supertoroid::suite::ground_truth::{compare, make_case};
 
 fn main() {
     let cases: usize = std::env::args()

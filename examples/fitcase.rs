@@ -3,9 +3,9 @@
 //! with SEARCH set, by `Method::Search`; with TRUTH set, the likelihood of the fit against the truth refined.
 use supertoroid::bench::synthetic::{Presentation, category, presented};
 use supertoroid::eval::{CpuEvaluator, Normalization};
-use supertoroid::fit::ground_truth::{compare, make_case};
 use supertoroid::fit::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, fit, likelihood, objective};
 use supertoroid::model::Pose;
+use supertoroid::suite::ground_truth::{compare, make_case};
 use supertoroid::synth;
 
 fn main() {

@@ -5,9 +5,9 @@
 
 use supertoroid::bench::grasps::{FRICTION, gripper_for};
 use supertoroid::eval::CpuEvaluator;
-use supertoroid::fit::ground_truth::{compare, make_case};
 use supertoroid::fit::{FitOptions, fit};
 use supertoroid::grasp::{GraspRequest, plan::plan};
+use supertoroid::suite::ground_truth::{compare, make_case};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();

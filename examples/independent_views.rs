@@ -12,16 +12,16 @@ use clap::ValueEnum;
 use glam::{DQuat, DVec3};
 use rand::Rng;
 use supertoroid::eval::CpuEvaluator;
-use supertoroid::fit::ground_truth::compare;
 use supertoroid::fit::{FitOptions, Method, Viewpoint, fit};
 use supertoroid::model::{Pose, Shape};
+use supertoroid::suite::ground_truth::compare;
 use supertoroid::synth::{self, Camera, Intrinsics};
 
 /// One view in its camera's frame, with the truth in that frame.
 fn view(seed: u64) -> (Vec<DVec3>, Shape, Pose) {
     let mut rng = synth::rng(seed);
     // the suite's shapes, drawn otherwise
-    let (shape, axis) = supertoroid::fit::ground_truth::random_shape(&mut rng);
+    let (shape, axis) = supertoroid::suite::ground_truth::random_shape(&mut rng);
     let intrinsics = Intrinsics::REALSENSE_640X480;
     // far enough for the object to fill about half the image's height
     let distance = intrinsics.fy * 2.0 * shape.size() / (0.5 * intrinsics.height as f64);

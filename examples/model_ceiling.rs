@@ -14,7 +14,7 @@
 
 use supertoroid::bench::synthetic::{DEFAULT_SEED, category};
 use supertoroid::fit::FitOptions;
-use supertoroid::fit::ground_truth::{TruthPoints, make_case, recovered_from_truth};
+use supertoroid::suite::ground_truth::{TruthPoints, make_case, recovered_from_truth};
 
 fn main() {
     let seeds: Vec<u64> = std::env::args()

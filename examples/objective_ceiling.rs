@@ -8,8 +8,8 @@
 use std::time::Instant;
 use supertoroid::bench::synthetic::category;
 use supertoroid::eval::Normalization;
-use supertoroid::fit::ground_truth::{compare, make_case};
 use supertoroid::fit::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, likelihood, objective};
+use supertoroid::suite::ground_truth::{compare, make_case};
 use supertoroid::synth;
 
 fn main() {

@@ -11,6 +11,8 @@
 //!   candidates): WGSL compute shaders through wgpu, and the f64 CPU reference.
 //! * [`io`]: cloud readers and writers.
 //! * [`fit`], [`solve`]: the two-stage fit and its interior-point solver.
+//! * [`suite`]: the ground-truth suite the fit is judged on (cases, the success rule) and
+//!   the share of them an efficient estimator would get right.
 //! * [`grasp`]: surface queries and parallel-jaw grasps on a fitted object.
 //! * [`export`]: fitted objects as meshes, MJCF and URDF for simulators and planners.
 //! * [`scene`]: the table found and taken away from a depth frame's box.
@@ -31,4 +33,5 @@ pub mod render;
 pub mod scene;
 pub mod service;
 pub mod solve;
+pub mod suite;
 pub mod synth;

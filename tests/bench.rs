@@ -269,7 +269,7 @@ fn bench_synthetic_and_scaling_write_every_field() {
                 "attainable",
             ],
         );
-        // the efficient estimator's share (`fit::attainable`): a probability, and
+        // the efficient estimator's share (`suite::attainable`): a probability, and
         // certain on a noise-free cloud
         let attainable = c["attainable"].as_f64().unwrap();
         assert!((0.0..=1.0).contains(&attainable), "{attainable}");

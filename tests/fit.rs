@@ -2,8 +2,8 @@
 
 use glam::DVec3;
 use supertoroid::eval::*;
-use supertoroid::fit::ground_truth::{Case, compare, make_case};
 use supertoroid::fit::{FitError, FitOptions, FitReport, fit};
+use supertoroid::suite::ground_truth::{Case, compare, make_case};
 
 /// Full clouds, noise 0-2% of the size, 0-10% outliers: a seeded CI subset of the suite.
 /// Measured when this test was written: 10 of 12 (the target of issue 4 is 98%; partial
@@ -1218,7 +1218,7 @@ fn ninety_percent_where_the_noise_is_under_a_tenth_of_the_thinnest_half_axis() {
 /// least-squares optimum).
 #[test]
 fn the_estimator_from_the_truth_moves_off_it_and_stays_within_tolerance() {
-    use supertoroid::fit::ground_truth::{TruthPoints, model_from_truth};
+    use supertoroid::suite::ground_truth::{TruthPoints, model_from_truth};
     let options = FitOptions::default();
     let seed = 10_002;
     let case = suite_case(10_000, seed);
@@ -1472,7 +1472,7 @@ fn the_noise_model_grid_is_fine_enough_for_one_percent_noise() {
 /// without the viewpoint, which the polish does not touch.)
 #[test]
 fn known_dimensions_pin_down_single_views() {
-    use supertoroid::fit::ground_truth::{AXIS_BOUND_DEGREES, CENTRE_BOUND};
+    use supertoroid::suite::ground_truth::{AXIS_BOUND_DEGREES, CENTRE_BOUND};
     let mut evaluator = CpuEvaluator::new();
     let cases = suite_cases(|partial, noise, _| partial && noise <= 0.011);
     let (mut pose, mut all, mut pose_free, mut all_free) = (0, 0, 0, 0);

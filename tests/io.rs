@@ -329,7 +329,7 @@ fn fitting_a_rendered_depth_frame_recovers_the_object() {
     let world: Vec<DVec3> = cloud.iter().map(|c| camera.pose.to_world(*c)).collect();
     let mut evaluator = supertoroid::eval::CpuEvaluator::new();
     let report = supertoroid::fit::fit(&mut evaluator, &world, &Default::default()).unwrap();
-    let e = supertoroid::fit::ground_truth::compare(
+    let e = supertoroid::suite::ground_truth::compare(
         (&shape, &pose),
         (&report.fitted.0, &report.fitted.1),
     );

@@ -167,7 +167,7 @@ fn the_depth_route_with_only_a_box_fits_the_object_and_refuses_a_bare_table() {
         camera.pose.rotation * in_camera.rotation,
         camera.pose.to_world(in_camera.translation),
     );
-    let errors = supertoroid::fit::ground_truth::compare((&shape, &pose), (&fitted, &in_world));
+    let errors = supertoroid::suite::ground_truth::compare((&shape, &pose), (&fitted, &in_world));
     assert!(errors.success(), "{errors:?}: {}", fit["shape"]);
     // the table comes back, and the grasps keep the hand above it
     let table: Plane = serde_json::from_value(fit["table"].clone()).unwrap();

@@ -16,7 +16,7 @@ use common::{Server, client};
 
 /// A ground-truth case's cloud as JSON points.
 fn case_points(seed: u64, partial: bool, noise: f64, outliers: f64) -> Vec<[f64; 3]> {
-    supertoroid::fit::ground_truth::make_case(seed, partial, noise, outliers)
+    supertoroid::suite::ground_truth::make_case(seed, partial, noise, outliers)
         .points
         .iter()
         .map(|p| p.to_array())
@@ -293,7 +293,8 @@ fn a_depth_frame_as_json_and_as_multipart_fits_the_object() {
     );
     let s = shape_of(&from_json);
     let fitted_shape = Shape::new(s[0], s[1], s[2], s[3], s[4], s[5]);
-    let e = supertoroid::fit::ground_truth::compare((&shape, &pose), (&fitted_shape, &fitted_pose));
+    let e =
+        supertoroid::suite::ground_truth::compare((&shape, &pose), (&fitted_shape, &fitted_pose));
     assert!(e.success(), "{e:?}");
 
     // raw u16 with a mask part: only the masked half is fitted
@@ -828,7 +829,7 @@ fn the_viewpoint_given_or_said_to_be_none_is_the_one_reported() {
     let server = Server::start(cpu_config());
     let c = client();
     // a single view in its camera's frame
-    let (view, _) = supertoroid::fit::ground_truth::make_case(6, true, 0.0, 0.0)
+    let (view, _) = supertoroid::suite::ground_truth::make_case(6, true, 0.0, 0.0)
         .in_camera_frame()
         .unwrap();
     let points: Vec<[f64; 3]> = view.iter().map(|p| p.to_array()).collect();
@@ -1062,7 +1063,7 @@ fn sigterm_lets_the_in_flight_fit_finish() {
     let (mut server, url) =
         spawn_serve(&["--backend", "cpu"], &[("SUPERTOROID_LOG_FORMAT", "json")]);
     let c = client();
-    let case = supertoroid::fit::ground_truth::make_case(7, false, 0.01, 0.0);
+    let case = supertoroid::suite::ground_truth::make_case(7, false, 0.01, 0.0);
     let points: Vec<[f64; 3]> =
         synth::sample_surface(&case.shape, &case.pose, 50_000, &mut synth::rng(7))
             .iter()

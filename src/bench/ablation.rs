@@ -9,9 +9,9 @@ use super::synthetic::{Presentation, category, presented};
 use super::{Machine, Report, Stats};
 use crate::eval::{Backend, make_evaluator};
 use crate::fit::ablation::{self, Stage};
-use crate::fit::ground_truth::{compare, make_case};
 use crate::fit::{FitOptions, fit};
 use crate::model::Pose;
+use crate::suite::ground_truth::{compare, make_case};
 use clap::ValueEnum;
 use serde::Serialize;
 

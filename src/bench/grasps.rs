@@ -6,9 +6,9 @@
 use super::Report;
 use super::synthetic::{category, wilson_interval};
 use crate::eval::{Backend, make_evaluator};
-use crate::fit::ground_truth::{compare, make_case};
 use crate::fit::{FitOptions, Viewpoint, fit};
 use crate::grasp::{GraspRequest, Gripper, check_on_surface, plan::plan};
+use crate::suite::ground_truth::{compare, make_case};
 use serde::Serialize;
 
 /// How far a contact may lie from the true surface, metres.

@@ -1,4 +1,4 @@
-//! `bench synthetic`: the ground-truth suite ([`crate::fit::ground_truth`]). Case i of a set (seed `seed + i`)
+//! `bench synthetic`: the ground-truth suite ([`crate::suite::ground_truth`]). Case i of a set (seed `seed + i`)
 //! falls in category i mod 18: full or single-view partial cloud x noise 0, 1, 2% of the
 //! size x outliers 0, 5, 10%. Success is `ground_truth::Errors::success` (centre 5% of
 //! size, axis 5 degrees, sizes and a4 10%, eps 0.15, up to the symmetries). Several sets
@@ -9,11 +9,12 @@
 
 use super::{Machine, Report, Stats};
 use crate::eval::{Backend, make_evaluator};
-use crate::fit::ground_truth::{
+use crate::fit::{FitOptions, Viewpoint, ViewpointSource, fit};
+use crate::model::Pose;
+use crate::suite::attainable;
+use crate::suite::ground_truth::{
     AXIS_BOUND_DEGREES, CENTRE_BOUND, TruthPoints, compare, make_case, recovered_from_truth,
 };
-use crate::fit::{FitOptions, Viewpoint, ViewpointSource, attainable, fit};
-use crate::model::Pose;
 use serde::Serialize;
 
 /// The suite's first case seed (`bench synthetic --seed`): case i uses seed + i.
@@ -53,7 +54,7 @@ pub struct Case {
     /// whether it carried any warning at all
     pub warned: bool,
     /// the share of an efficient estimator's fits of this cloud within the tolerances
-    /// (`fit::attainable`: the Cramér-Rao bound of its inliers); NaN where it has none
+    /// (`suite::attainable`: the Cramér-Rao bound of its inliers); NaN where it has none
     pub attainable: f64,
     /// the share of the fit's visible surface that has points on it (`fit::coverage`,
     /// single views with the viewpoint); NaN without one
@@ -95,7 +96,7 @@ impl Presentation {
 /// A case's cloud as `presentation` gives it to the fit, with its viewpoint option and
 /// the pose that maps the fit back to the suite's frame.
 pub fn presented(
-    case: &crate::fit::ground_truth::Case,
+    case: &crate::suite::ground_truth::Case,
     presentation: Presentation,
 ) -> (Vec<glam::DVec3>, Viewpoint, Pose) {
     let identity = Pose::new(glam::DQuat::IDENTITY, glam::DVec3::ZERO);
@@ -609,7 +610,7 @@ impl Report for SyntheticReport {
             100.0 * self.partial_pose_rate
         );
         md += &format!(
-            "What the clouds allow (`fit::attainable`): an efficient estimator, one that reaches the Cramér-Rao bound of each cloud's inliers, would succeed on {:.1}% overall and {:.1}% of the partial clouds with outliers (a first-order figure: see the module's caveats).\n\n",
+            "What the clouds allow (`suite::attainable`): an efficient estimator, one that reaches the Cramér-Rao bound of each cloud's inliers, would succeed on {:.1}% overall and {:.1}% of the partial clouds with outliers (a first-order figure: see the module's caveats).\n\n",
             100.0 * self.attainable_overall_rate,
             100.0 * self.attainable_partial_with_outliers_rate
         );

@@ -799,7 +799,7 @@ const SCORE_CUTOFF: f64 = 6.0;
 /// parameters as in [`PARAMETERS`]), estimated by the mean outer product of the points'
 /// scores (gradients of ln p(x_i)). Times the number of points, its inverse is the
 /// Cramér-Rao bound: the smallest covariance an unbiased estimator can reach on clouds
-/// drawn from this model ([`super::attainable`]). The points should be drawn at these
+/// drawn from this model ([`crate::suite::attainable`]). The points should be drawn at these
 /// parameters; `outlier_weight` as in [`refine`]. None where [`refine`] would not run.
 pub fn scores(
     points: &[DVec3],

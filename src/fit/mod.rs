@@ -31,11 +31,9 @@
 //! evaluation per solver iteration serves every cloud; [`fit`] is a batch of one.
 
 pub mod ablation;
-pub mod attainable;
 mod checks;
 pub mod coverage;
 pub mod free_space;
-pub mod ground_truth;
 mod inferred_view;
 mod ledger;
 pub mod likelihood;
@@ -1051,7 +1049,7 @@ mod tests {
     /// that did not replace it).
     #[test]
     fn a_check_that_replaces_nothing_still_charges_its_time() {
-        let case = ground_truth::make_case(7, false, 0.0, 0.0);
+        let case = crate::suite::ground_truth::make_case(7, false, 0.0, 0.0);
         let mut evaluator = CpuEvaluator::new();
         let fitted = fit(&mut evaluator, &case.points, &FitOptions::default()).unwrap();
         let before = fitted.timing_ms.total;

@@ -258,7 +258,7 @@ pub fn request_schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schem
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fit::ground_truth::make_case;
+    use crate::suite::ground_truth::make_case;
 
     /// A suite case's single view in its camera's optical frame.
     fn in_camera_frame(seed: u64, noise: f64, outliers: f64) -> Vec<DVec3> {

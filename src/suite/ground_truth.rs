@@ -3,8 +3,8 @@
 //! of the size, hole axis within 5 degrees, each a_i within 10%, each eps within 0.15,
 //! up to the shape's symmetries: axis sign, and the a1/a2 swap with a quarter turn).
 
-use super::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, likelihood};
 use crate::eval::Normalization;
+use crate::fit::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, likelihood};
 use crate::model::{Pose, Shape};
 use crate::synth::{self, Camera, Intrinsics};
 use glam::{DQuat, DVec3};

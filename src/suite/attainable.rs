@@ -1,6 +1,6 @@
 //! What the ground-truth suite's targets ask of any fit: the Cramér-Rao bound of its clouds.
 //!
-//! A cloud of n points drawn from the generative model of [`super::likelihood`] (points
+//! A cloud of n points drawn from the generative model of [`crate::fit::likelihood`] (points
 //! spread over the surface, or over what a sensor saw of it, blurred by isotropic Gaussian
 //! noise) carries the Fisher information n·I(θ) about the twelve parameters (sigma is a
 //! thirteenth, a nuisance). No unbiased estimator has a covariance below (n·I)⁻¹.
@@ -16,10 +16,10 @@
 //! little). What it tells apart: a failed case whose ceiling is near 1 is the method's
 //! miss; one whose ceiling is near 0 is beyond what its points say.
 
-use super::likelihood::{self, PARAMETERS};
 use crate::eval::{Candidate, Normalization};
-use crate::fit::ground_truth::{Case, compare};
+use crate::fit::likelihood::{self, PARAMETERS};
 use crate::model::{Pose, Shape};
+use crate::suite::ground_truth::{Case, compare};
 use crate::synth;
 use glam::{DQuat, DVec3};
 use nalgebra::{SMatrix, SVector};
