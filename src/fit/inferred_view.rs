@@ -21,16 +21,22 @@ const VIEW_TEST_MIN_SIGMA: f64 = 0.01;
 /// side that faced the sensor, so spreading the density over the whole surface roughly
 /// halves it; an all-round cloud's far side is all but impossible as a view, unless its
 /// section is thinner than the noise. False where the model does not run (no hole).
+/// The cloud normalised, and an even stride of about `count` of its points in that frame.
+pub(super) fn normalised_stride(points: &[DVec3], count: usize) -> (Normalization, Vec<DVec3>) {
+    let norm = Normalization::of(points);
+    let sample = points
+        .iter()
+        .step_by(points.len().div_ceil(count).max(1))
+        .map(|p| norm.point(*p))
+        .collect();
+    (norm, sample)
+}
+
 fn more_likely_all_round(points: &[DVec3], options: &FitOptions, r: &FitReport) -> bool {
     let Some(viewpoint) = options.viewpoint.position() else {
         return false;
     };
-    let norm = Normalization::of(points);
-    let sample: Vec<DVec3> = points
-        .iter()
-        .step_by(points.len().div_ceil(VIEW_TEST_POINTS).max(1))
-        .map(|p| norm.point(*p))
-        .collect();
+    let (norm, sample) = normalised_stride(points, VIEW_TEST_POINTS);
     let candidate = norm.candidate(&r.fitted.0, &r.fitted.1);
     let sigma = (r.quality.noise_sigma / norm.scale).max(VIEW_TEST_MIN_SIGMA);
     let score = |v| likelihood::objective(&sample, &candidate, sigma, LIKELIHOOD_OUTLIER_WEIGHT, v);

@@ -253,14 +253,16 @@ pub fn fit_batch(
         .iter()
         .map(|(points, o)| screen_for_an_object(points, o.seed))
         .collect();
-    let objects: Vec<usize> = (0..clouds.len()).filter(|&i| screens[i].is_ok()).collect();
-    let picked: Vec<_> = objects.iter().map(|&i| clouds[i]).collect();
-    let mut fits = if picked.is_empty() {
+    let objects: Vec<_> = clouds
+        .iter()
+        .zip(&screens)
+        .filter(|(_, screen)| screen.is_ok())
+        .map(|(cloud, _)| *cloud)
+        .collect();
+    let mut fits = if objects.is_empty() {
         Vec::new()
-    } else if picked.iter().any(|(_, o)| o.method == Method::Search) {
-        search::batch::fit_batch_by_method(evaluator, &picked)?
     } else {
-        fit_batch_unscreened(evaluator, &picked)?
+        fit_batch_unscreened(evaluator, &objects)?
     }
     .into_iter();
     Ok(screens

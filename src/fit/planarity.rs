@@ -16,7 +16,7 @@
 //! many points); empty cells that the empty border cannot reach, edge to edge, are
 //! enclosed. At least [`MIN_HOLE_CELLS`] of them make a hole.
 
-use super::scatter;
+use super::{scatter, starts};
 use crate::scene::plane::fit_plane;
 use glam::{DVec2, DVec3};
 
@@ -91,19 +91,15 @@ pub fn planarity(cloud: &[DVec3], seed: u64) -> Planarity {
 /// The typical spacing of 2-D points: the median distance to the nearest neighbour of
 /// an even sample of them.
 fn typical_spacing(points: &[DVec2]) -> Option<f64> {
+    let lifted: Vec<DVec3> = points.iter().map(|p| p.extend(0.0)).collect();
     let step = points.len().div_ceil(SPACING_SAMPLES).max(1);
-    let mut nearest: Vec<f64> = points
+    let mut buffer = Vec::new();
+    let mut nearest: Vec<f64> = lifted
         .iter()
-        .enumerate()
         .step_by(step)
-        .filter_map(|(i, p)| {
-            points
-                .iter()
-                .enumerate()
-                .filter(|&(j, q)| j != i && q != p)
-                .map(|(_, q)| p.distance_squared(*q))
-                .min_by(f64::total_cmp)
-        })
+        .filter(|_| lifted.len() > 1)
+        // (the point itself is the nearest, at 0; its neighbour the next)
+        .map(|p| starts::nearest(&lifted, *p, 1, &mut buffer)[1].0)
         .collect();
     if nearest.is_empty() {
         return None;

@@ -42,8 +42,13 @@ const FIXED_LENGTHS: &[(&str, &str, &[u64])] = &[
     ("Grasp", "normals", &[2, 3]),
 ];
 
-/// The served document.
-pub fn document() -> Value {
+/// The served document, built once.
+pub fn document() -> &'static Value {
+    static DOCUMENT: std::sync::LazyLock<Value> = std::sync::LazyLock::new(build);
+    &DOCUMENT
+}
+
+fn build() -> Value {
     let mut doc = serde_json::to_value(super::api::ApiDoc::openapi())
         .expect("the OpenAPI document serialises");
     let schemas = &mut doc["components"]["schemas"];

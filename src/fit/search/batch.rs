@@ -11,23 +11,29 @@ pub(in crate::fit) fn fit_batch_by_method(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
-    let (searched, others): (Vec<usize>, Vec<usize>) =
-        (0..clouds.len()).partition(|&i| clouds[i].1.method == Method::Search);
-    let pick = |indices: &[usize]| indices.iter().map(|&i| clouds[i]).collect::<Vec<_>>();
-    let mut answers: Vec<Option<Result<FitReport, FitError>>> =
-        (0..clouds.len()).map(|_| None).collect();
-    let found = fit_batch_searched(evaluator, &pick(&searched))?;
-    for (i, r) in searched.into_iter().zip(found) {
-        answers[i] = Some(r);
+    let searched: Vec<bool> = clouds
+        .iter()
+        .map(|(_, o)| o.method == Method::Search)
+        .collect();
+    let pick = |want: bool| -> Vec<_> {
+        clouds
+            .iter()
+            .zip(&searched)
+            .filter(|(_, s)| **s == want)
+            .map(|(cloud, _)| *cloud)
+            .collect()
+    };
+    let mut found = fit_batch_searched(evaluator, &pick(true))?.into_iter();
+    let others = pick(false);
+    let mut fitted = if others.is_empty() {
+        Vec::new()
+    } else {
+        fit_batch_unscreened(evaluator, &others)?
     }
-    if !others.is_empty() {
-        let found = fit_batch_unscreened(evaluator, &pick(&others))?;
-        for (i, r) in others.into_iter().zip(found) {
-            answers[i] = Some(r);
-        }
-    }
-    Ok(answers
-        .into_iter()
+    .into_iter();
+    Ok(searched
+        .iter()
+        .map(|&s| if s { found.next() } else { fitted.next() })
         .map(|r| r.expect("one answer per cloud"))
         .collect())
 }

@@ -79,20 +79,16 @@ pub(super) struct Sample {
 }
 
 impl Sample {
-    pub(super) fn new(points: &[DVec3], viewpoint: Option<DVec3>) -> Self {
+    /// The sample seen from `viewpoint`; without one, `all_round` says whether the points
+    /// cover their object all round (else only their distances are scored).
+    pub(super) fn new(points: &[DVec3], viewpoint: Option<DVec3>, all_round: bool) -> Self {
         let volume = likelihood::outlier_volume(points, SIGMA_FLOOR);
         Self {
             points: points.to_vec(),
             sensor: viewpoint.map(|v| Sensor::new(points, v)),
             outlier_density: LIKELIHOOD_OUTLIER_WEIGHT / volume,
-            distances_only: false,
+            distances_only: viewpoint.is_none() && !all_round,
         }
-    }
-
-    /// The sample of a cloud from nowhere whose points do not cover its object all round.
-    pub(super) fn distances_only(mut self) -> Self {
-        self.distances_only = self.sensor.is_none();
-        self
     }
 
     /// The negative mean log-likelihood of the points' first-order distances to a
@@ -285,14 +281,7 @@ pub(super) fn search_group(
     let samples1: Vec<Sample> = group
         .iter()
         .enumerate()
-        .map(|(cloud, (_, p))| {
-            let s = Sample::new(&p.stage1_pts, p.viewpoint);
-            if nowhere_twin[cloud] {
-                s
-            } else {
-                s.distances_only()
-            }
-        })
+        .map(|(cloud, (_, p))| Sample::new(&p.stage1_pts, p.viewpoint, nowhere_twin[cloud]))
         .collect();
 
     // Round 1: every start on the stage-1 sample.
@@ -356,12 +345,7 @@ pub(super) fn search_group(
         .collect();
     let mut dropped = vec![false; group.len()];
     let sample = |p: &Prepared, points: &[DVec3], cloud: usize| {
-        let s = Sample::new(points, p.viewpoint);
-        if all_round[cloud] {
-            s
-        } else {
-            s.distances_only()
-        }
+        Sample::new(points, p.viewpoint, all_round[cloud])
     };
     let samples2: Vec<Sample> = group
         .iter()
@@ -716,15 +700,10 @@ pub(super) struct ViewTest {
 
 impl ViewTest {
     pub(super) fn new(points: &[DVec3], viewpoint: DVec3, count: usize) -> Self {
-        let norm = Normalization::of(points);
-        let sample: Vec<DVec3> = points
-            .iter()
-            .step_by(points.len().div_ceil(count).max(1))
-            .map(|p| norm.point(*p))
-            .collect();
+        let (norm, sample) = inferred_view::normalised_stride(points, count);
         Self {
-            view: Sample::new(&sample, Some(norm.point(viewpoint))),
-            all_round: Sample::new(&sample, None),
+            view: Sample::new(&sample, Some(norm.point(viewpoint)), true),
+            all_round: Sample::new(&sample, None, true),
             norm,
         }
     }
