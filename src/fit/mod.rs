@@ -259,12 +259,7 @@ pub fn fit_batch(
         .filter(|(_, screen)| screen.is_ok())
         .map(|(cloud, _)| *cloud)
         .collect();
-    let mut fits = if objects.is_empty() {
-        Vec::new()
-    } else {
-        fit_batch_unscreened(evaluator, &objects)?
-    }
-    .into_iter();
+    let mut fits = fit_batch_unscreened(evaluator, &objects)?.into_iter();
     Ok(screens
         .into_iter()
         .map(|screen| {
@@ -304,6 +299,9 @@ pub(in crate::fit) fn fit_batch_unscreened(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
+    if clouds.is_empty() {
+        return Ok(Vec::new());
+    }
     if clouds.iter().any(|(_, o)| o.method == Method::Search) {
         return search::batch::fit_batch_by_method(evaluator, clouds);
     }

@@ -24,13 +24,7 @@ pub(in crate::fit) fn fit_batch_by_method(
             .collect()
     };
     let mut found = fit_batch_searched(evaluator, &pick(true))?.into_iter();
-    let others = pick(false);
-    let mut fitted = if others.is_empty() {
-        Vec::new()
-    } else {
-        fit_batch_unscreened(evaluator, &others)?
-    }
-    .into_iter();
+    let mut fitted = fit_batch_unscreened(evaluator, &pick(false))?.into_iter();
     Ok(searched
         .iter()
         .map(|&s| if s { found.next() } else { fitted.next() })
