@@ -1941,3 +1941,62 @@ fn the_objective_keeps_the_rims_of_a_pinched_section_seen_by_a_sensor() {
         "objective {new}, grid model {grid} (mean negative log-likelihood per point)"
     );
 }
+
+#[test]
+fn auto_tells_rings_from_boxes_and_cans_on_single_views() {
+    use supertoroid::bench::synthetic::{Presentation, category, presented};
+    use supertoroid::fit::Model;
+    use supertoroid::suite::chamfer::{CHAMFER_BOUND, relative_chamfer};
+    use supertoroid::suite::ground_truth::{Kind, make_case_of};
+    // noisy single views of the model-choice suite (`bench models`: even cases holed,
+    // odd ones superellipsoids), posted in the camera's frame with no options
+    let mut evaluator = CpuEvaluator::new();
+    for seed in [600_021u64, 600_027, 600_022, 600_026] {
+        let i = (seed % 1000) as usize;
+        let kind = if i % 2 == 0 {
+            Kind::Holed
+        } else {
+            Kind::Superellipsoid
+        };
+        let (partial, noise, outliers) = category(i / 2);
+        assert!(partial && noise > 0.0);
+        let case = make_case_of(kind, seed, partial, noise, outliers);
+        let (points, viewpoint, back) = presented(&case, Presentation::Camera);
+        let options = FitOptions {
+            seed,
+            viewpoint,
+            model: Model::Auto,
+            ..Default::default()
+        };
+        let r = fit(&mut evaluator, &points, &options).unwrap();
+        let f = r.fitted.1;
+        let pose =
+            supertoroid::model::Pose::new(back.rotation * f.rotation, back.to_world(f.translation));
+        let bic = r.model.bic.expect("auto reports both scores");
+        match kind {
+            Kind::Holed => {
+                assert_eq!(r.model.kind, Model::Supertoroid, "{seed}: {bic:?}");
+                let e = compare((&case.shape, &case.pose), (&r.fitted.0, &pose));
+                assert!(e.success(), "{seed}: {e:?}");
+            }
+            Kind::Superellipsoid => {
+                assert_eq!(r.model.kind, Model::Superellipsoid, "{seed}: {bic:?}");
+                assert_eq!(r.shape.a4, 0.0);
+                let d = relative_chamfer((&case.shape, &case.pose), (&r.fitted.0, &pose));
+                assert!(d < CHAMFER_BOUND, "{seed}: chamfer {d}");
+            }
+        }
+        assert_eq!(r.model.chosen_by, "bic");
+    }
+    // a superellipsoid cannot have a hole
+    let case = make_case_of(Kind::Holed, 600_000, false, 0.0, 0.0);
+    let options = FitOptions {
+        model: Model::Superellipsoid,
+        known_shape: [None, None, None, Some(2.0), None, None],
+        ..Default::default()
+    };
+    assert!(matches!(
+        fit(&mut evaluator, &case.points, &options),
+        Err(supertoroid::fit::FitError::InvalidOption(_))
+    ));
+}

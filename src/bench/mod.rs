@@ -1,13 +1,16 @@
 //! The benchmark harness behind `supertoroid bench`: the paper's table on real clouds
 //! ([`paper`]), the ground-truth suite ([`synthetic`]) and evaluator scaling
-//! ([`scaling`]), and grasps planned on fits checked on the truth ([`grasps`]). Every sub-bench returns a serialisable report and writes it as JSON and
+//! ([`scaling`]), grasps planned on fits checked on the truth ([`grasps`]), and the choice between
+//! supertoroid and superellipsoid ([`models`]), and whole table-top scenes ([`scenes`]). Every sub-bench returns a serialisable report and writes it as JSON and
 //! CSV (for machines) and markdown (for people), with the machine and git revision.
 
 pub mod ablation;
 pub mod grasps;
+pub mod models;
 pub mod paper;
 pub mod plot;
 pub mod scaling;
+pub mod scenes;
 pub mod synthetic;
 
 use serde::Serialize;

@@ -11,6 +11,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 mod objects;
+mod scene;
 
 #[derive(Parser, Debug)]
 #[command(name = "supertoroid", version, about = "Fit supertoroids to 3D point clouds", long_about = None)]
@@ -77,6 +78,12 @@ pub enum Command {
     ///
     /// Example: supertoroid export fit.json --plane 0,0,1,0 --out scene/
     Export(objects::ExportArgs),
+    /// Find the table in a depth frame and fit every object on it (supertoroid or
+    /// superellipsoid, chosen by BIC), as POST /v1/scene does; print the scene as JSON
+    /// (poses in the camera's optical frame), which `export` and `grasps` read.
+    ///
+    /// Example: supertoroid scene frame.png --intrinsics 615,615,320,240 --meshes objects/ > scene.json
+    Scene(scene::SceneArgs),
 }
 
 #[derive(Args, Debug)]
@@ -114,6 +121,9 @@ pub struct BenchArgs {
     /// pipeline for the fits (paper, synthetic): default, search (one bounded search, measured against the default) or paper
     #[arg(long, global = true, value_enum, default_value = "default")]
     pub method: crate::fit::Method,
+    /// model of the fits: as `fit --model` (default: as `fit`; auto for `models`)
+    #[arg(long, global = true, value_enum)]
+    pub model: Option<crate::fit::Model>,
     /// fit as `fit --thorough` does (paper, synthetic)
     #[arg(long, global = true)]
     pub thorough: bool,
@@ -184,6 +194,22 @@ pub enum BenchCommand {
     Grasps {
         #[arg(long, default_value_t = 180)]
         cases: usize,
+        #[arg(long, default_value_t = crate::bench::synthetic::DEFAULT_SEED)]
+        seed: u64,
+    },
+    /// Model choice on a mixed suite: half supertoroids with a hole, half
+    /// superellipsoids, as users post them; fitted with `--model` (default auto here).
+    Models {
+        #[arg(long, default_value_t = 72)]
+        cases: usize,
+        #[arg(long, default_value_t = crate::bench::synthetic::DEFAULT_SEED)]
+        seed: u64,
+    },
+    /// Synthetic table-top frames (3-6 objects, with a hole and without, a D435-like
+    /// sensor), segmented and fitted as `/v1/scene` does.
+    Scenes {
+        #[arg(long, default_value_t = 20)]
+        frames: usize,
         #[arg(long, default_value_t = crate::bench::synthetic::DEFAULT_SEED)]
         seed: u64,
     },
@@ -276,6 +302,10 @@ pub struct FitArgs {
     /// pipeline: default; search (one bounded search on the noise model, measured against the default); or paper (the paper's procedure as a baseline; see the README)
     #[arg(long, value_enum, default_value = "default")]
     pub method: crate::fit::Method,
+    /// model: supertoroid (a4 free: a hole or none), superellipsoid (a4 = 0), or auto
+    /// (both fitted, the lower BIC chosen; the report says both)
+    #[arg(long, value_enum, default_value_t = crate::fit::FitOptions::default().model)]
+    pub model: crate::fit::Model,
     /// known section half-height a3 in the cloud's units (held fixed): one view cannot
     /// tell how thick an object is
     #[arg(long)]
@@ -431,6 +461,7 @@ pub fn run(cli: Cli) -> Result<(), Failure> {
         Command::Bench(args) => bench(args),
         Command::Render(args) => render(args),
         Command::Grasps(args) => objects::grasps(args),
+        Command::Scene(args) => scene::scene(args),
         Command::Surface(args) => objects::surface(args),
         Command::Export(args) => objects::export(args),
     }
@@ -536,6 +567,7 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
             .map_err(Failure::input)?,
         viewpoint,
         method: args.method,
+        model: args.model,
         unseen_surface_retries: args.retries,
         noise_model: !args.no_noise_model,
         thorough: args.thorough,
@@ -593,7 +625,7 @@ pub(crate) fn internal(e: impl std::fmt::Display) -> Failure {
     }
 }
 
-fn write_file(
+pub(crate) fn write_file(
     path: &std::path::Path,
     write: impl FnOnce(&mut Vec<u8>) -> std::io::Result<()>,
 ) -> Result<(), Failure> {
@@ -660,6 +692,9 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         .unwrap_or(Backend::Auto);
     let options = crate::fit::FitOptions {
         method: args.method,
+        model: args
+            .model
+            .unwrap_or(crate::fit::FitOptions::default().model),
         thorough: args.thorough,
         unseen_surface_retries: args.retries,
         skip: args.skip.clone(),
@@ -731,6 +766,24 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         }
         BenchCommand::Grasps { cases, seed } => {
             let r = crate::bench::grasps::run(*cases, *seed, backend).map_err(Failure::input)?;
+            write(&|d| write_report(d, &r), r.markdown())
+        }
+        BenchCommand::Models { cases, seed } => {
+            let options = crate::fit::FitOptions {
+                model: args.model.unwrap_or(crate::fit::Model::Auto),
+                ..options.clone()
+            };
+            let r = crate::bench::models::run(*cases, *seed, backend, &options)
+                .map_err(Failure::input)?;
+            write(&|d| write_report(d, &r), r.markdown())
+        }
+        BenchCommand::Scenes { frames, seed } => {
+            let options = crate::fit::FitOptions {
+                model: args.model.unwrap_or(crate::fit::Model::Auto),
+                ..options.clone()
+            };
+            let r = crate::bench::scenes::run(*frames, *seed, backend, &options)
+                .map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }
         BenchCommand::Scaling {

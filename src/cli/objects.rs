@@ -1,5 +1,6 @@
 //! The commands on fitted objects: `grasps`, `surface`, `export`. Each reads the JSON
-//! `supertoroid fit` printed (or a file of several: `{"objects": [...], "plane": ...}`).
+//! `supertoroid fit` printed (or a file of several: `{"objects": [...], "plane": ...}`,
+//! as `supertoroid scene` prints it, each object's fit under `fit`).
 
 use super::{Failure, internal};
 use crate::grasp::{GraspOptions, Gripper, surface as query};
@@ -92,10 +93,19 @@ fn read_fits(path: &Path) -> Result<FitsFile, Failure> {
         Some(_) => return Err(what("objects must be an array".into())),
         None => vec![value.clone()],
     };
+    // a scene's object carries its fit under `fit` (none where it could not be fitted)
+    let items: Vec<&serde_json::Value> = items
+        .iter()
+        .filter_map(|item| match (item.get("fit"), item.get("error")) {
+            (Some(fit), _) => Some(fit),
+            (None, Some(_)) => None,
+            (None, None) => Some(item),
+        })
+        .collect();
     let mut objects = Vec::new();
     for item in &items {
         let object: FittedObject =
-            serde_json::from_value(item.clone()).map_err(|e| what(e.to_string()))?;
+            serde_json::from_value((*item).clone()).map_err(|e| what(e.to_string()))?;
         objects.push(object.validated().map_err(what)?);
     }
     let plane = match value.get("plane") {

@@ -84,6 +84,9 @@ pub enum Method {
 #[derive(Clone, Debug)]
 pub struct FitOptions {
     pub method: Method,
+    /// supertoroid, superellipsoid (a4 held at 0), or both and the better by BIC
+    /// ([`model_choice`])
+    pub model: Model,
     pub seed: u64,
     pub stage1_points: usize,
     pub stage2_points: usize,
@@ -162,6 +165,7 @@ impl Default for FitOptions {
     fn default() -> Self {
         Self {
             method: Method::Default,
+            model: Model::Supertoroid,
             seed: 0,
             stage1_points: 150,
             stage2_points: 1000,

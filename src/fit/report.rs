@@ -78,6 +78,8 @@ pub struct PointsOut {
 #[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct FitReport {
     pub method: Method,
+    /// the model the fit answers with, and how it was chosen
+    pub model: super::model_choice::ModelOut,
     pub shape: Shape,
     pub pose: PoseOut,
     pub quality: Quality,

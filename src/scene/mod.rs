@@ -1,10 +1,15 @@
-//! Scenes: the table an object stands on, found and taken away, so that a detector's box
-//! is enough to fit what is in it.
+//! Scenes: the table found and taken away, so that a detector's box is enough to fit
+//! what is in it, and a whole frame split into the objects on its table and fitted.
 //!
 //! * [`plane`]: a robust plane fit (seeded RANSAC, refined by least squares).
 //! * [`table`]: the table in a depth frame's box removed and the object kept as the
 //!   largest connected region of pixels above it; a box that holds nothing but the table
 //!   is refused.
+//! * [`objects`]: a whole frame's table and the objects standing on it, split apart by
+//!   Euclidean clustering on a k-d tree.
+//! * [`fit`]: every object of a frame fitted in one batch ([`fit::fit_scene`]).
 
+pub mod fit;
+pub mod objects;
 pub mod plane;
 pub mod table;

@@ -87,6 +87,9 @@ pub struct FitRequestOptions {
     pub time_budget_ms: Option<f64>,
     /// pipeline: default; search (one bounded search on the noise model, measured against the default); or paper (the paper's procedure, a baseline)
     pub method: Option<crate::fit::Method>,
+    /// model: supertoroid (a4 free), superellipsoid (a4 = 0) or auto (both fitted, the
+    /// lower BIC chosen; `model` in the answer gives both)
+    pub model: Option<crate::fit::Model>,
     /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
     pub format: Option<Format>,
     /// plan parallel-jaw grasps on the fit (JSON bodies only): the gripper and the
@@ -146,7 +149,7 @@ fn vector_from_array_or_text<'de, D: serde::Deserializer<'de>>(
 }
 
 impl FitRequestOptions {
-    fn job(&self, points: Vec<DVec3>, max_points: usize) -> Result<FitJob, ApiError> {
+    pub(super) fn job(&self, points: Vec<DVec3>, max_points: usize) -> Result<FitJob, ApiError> {
         let limit = |v: Option<usize>, default: usize, name: &str| -> Result<usize, ApiError> {
             let v = v.unwrap_or(default);
             if v > max_points {
@@ -192,6 +195,7 @@ impl FitRequestOptions {
                     .map_err(|m| ApiError::unprocessable("invalid_option", m))?,
                 viewpoint: self.viewpoint.unwrap_or_default(),
                 method: self.method.unwrap_or_default(),
+                model: self.model.unwrap_or(defaults.model),
                 unseen_surface_retries: retries,
                 noise_model: self.noise_model.unwrap_or(defaults.noise_model),
                 thorough: self.thorough.unwrap_or(defaults.thorough),
@@ -300,6 +304,7 @@ pub struct Health {
         fit_batch,
         super::geometry::surface,
         super::geometry::grasps,
+        super::scene::scene,
         healthz,
         readyz,
         metrics,
@@ -318,6 +323,8 @@ pub struct Health {
         super::geometry::SurfaceResponse,
         super::geometry::GraspsRequest,
         super::geometry::GraspsResponse,
+        super::scene::SceneRequest,
+        super::scene::SceneResponse,
         ErrorBody,
         ErrorDetail,
         Readiness,
@@ -338,6 +345,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/fit/batch", post(fit_batch))
         .route("/v1/surface", post(super::geometry::surface))
         .route("/v1/grasps", post(super::geometry::grasps))
+        .route("/v1/scene", post(super::scene::scene))
         .fallback(not_found)
         .layer(axum::extract::DefaultBodyLimit::max(
             state.config.body_limit,
@@ -601,78 +609,8 @@ async fn fit_depth(
     Extension(id): Extension<RequestId>,
     request: Request,
 ) -> Result<Json<FitResponse>, ApiError> {
-    let kind = content_type(request.headers());
-    let (params, depth_bytes, mask_bytes) = if kind == "application/json" {
-        let bytes = read_body(&state, request.into_body()).await?;
-        let mut params: DepthFitRequest = ApiError::parse_json(&bytes)?;
-        let decode = |field: &str, v: &Option<String>| -> Result<Option<Vec<u8>>, ApiError> {
-            v.as_ref()
-                .map(|s| {
-                    base64::engine::general_purpose::STANDARD
-                        .decode(s.as_bytes())
-                        .map_err(|e| {
-                            ApiError::bad_request("malformed_base64", format!("{field}: {e}"))
-                        })
-                })
-                .transpose()
-        };
-        let depth = match (
-            decode("depth_png", &params.depth_png)?,
-            decode("depth_raw", &params.depth_raw)?,
-        ) {
-            (Some(png), None) => DepthBytes::Png(png),
-            (None, Some(raw)) => DepthBytes::Raw(raw),
-            _ => {
-                return Err(ApiError::unprocessable(
-                    "invalid_request",
-                    "give exactly one of depth_png and depth_raw",
-                ));
-            }
-        };
-        let mask = decode("mask_png", &params.mask_png)?;
-        params.depth_png = None;
-        params.depth_raw = None;
-        (params, depth, mask)
-    } else if kind == "multipart/form-data" {
-        // the router's DefaultBodyLimit bounds the multipart stream
-        let mut multipart = Multipart::from_request(request, &())
-            .await
-            .map_err(|e| ApiError::bad_request("malformed_multipart", e.body_text()))?;
-        let mut params = None;
-        let mut depth = None;
-        let mut mask = None;
-        while let Some(field) = multipart.next_field().await.map_err(multipart_error)? {
-            let name = field.name().unwrap_or("").to_owned();
-            let data = field.bytes().await.map_err(multipart_error)?;
-            match name.as_str() {
-                "params" => params = Some(ApiError::parse_json::<DepthFitRequest>(&data)?),
-                "depth" => depth = Some(data.to_vec()),
-                "mask" => mask = Some(data.to_vec()),
-                other => {
-                    return Err(ApiError::unprocessable(
-                        "invalid_request",
-                        format!("unknown part {other:?} (params, depth, mask)"),
-                    ));
-                }
-            }
-        }
-        let params =
-            params.ok_or_else(|| ApiError::unprocessable("invalid_request", "no params part"))?;
-        let depth =
-            depth.ok_or_else(|| ApiError::unprocessable("invalid_request", "no depth part"))?;
-        let depth = if depth.starts_with(b"\x89PNG") {
-            DepthBytes::Png(depth)
-        } else {
-            DepthBytes::Raw(depth)
-        };
-        (params, depth, mask)
-    } else {
-        return Err(ApiError::new(
-            StatusCode::UNSUPPORTED_MEDIA_TYPE,
-            "unsupported_media_type",
-            format!("content type {kind:?}: send application/json or multipart/form-data"),
-        ));
-    };
+    let (params, depth_bytes, mask_bytes) =
+        read_depth_body::<DepthFitRequest>(&state, request).await?;
     let max_size = params.max_size.unwrap_or(DEFAULT_MAX_SIZE);
     if !(max_size.is_finite() && max_size > 0.0) {
         return Err(ApiError::unprocessable(
@@ -709,6 +647,102 @@ async fn fit_depth(
     Ok(response)
 }
 
+/// A request whose body carries a depth frame: its images in base64 (JSON), taken out
+/// of it by [`read_depth_body`].
+pub(super) trait DepthImages {
+    /// depth_png, depth_raw, mask_png
+    fn take_images(&mut self) -> [Option<String>; 3];
+}
+
+impl DepthImages for DepthFitRequest {
+    fn take_images(&mut self) -> [Option<String>; 3] {
+        [
+            self.depth_png.take(),
+            self.depth_raw.take(),
+            self.mask_png.take(),
+        ]
+    }
+}
+
+/// A depth frame's request as JSON (images in base64) or `multipart/form-data` (parts
+/// `params`, `depth`, `mask`): its parameters, the depth image's bytes and the mask's.
+pub(super) async fn read_depth_body<T: serde::de::DeserializeOwned + DepthImages>(
+    state: &AppState,
+    request: Request,
+) -> Result<(T, DepthBytes, Option<Vec<u8>>), ApiError> {
+    let kind = content_type(request.headers());
+    Ok(if kind == "application/json" {
+        let bytes = read_body(state, request.into_body()).await?;
+        let mut params: T = ApiError::parse_json(&bytes)?;
+        let [depth_png, depth_raw, mask_png] = params.take_images();
+        let decode = |field: &str, v: &Option<String>| -> Result<Option<Vec<u8>>, ApiError> {
+            v.as_ref()
+                .map(|s| {
+                    base64::engine::general_purpose::STANDARD
+                        .decode(s.as_bytes())
+                        .map_err(|e| {
+                            ApiError::bad_request("malformed_base64", format!("{field}: {e}"))
+                        })
+                })
+                .transpose()
+        };
+        let depth = match (
+            decode("depth_png", &depth_png)?,
+            decode("depth_raw", &depth_raw)?,
+        ) {
+            (Some(png), None) => DepthBytes::Png(png),
+            (None, Some(raw)) => DepthBytes::Raw(raw),
+            _ => {
+                return Err(ApiError::unprocessable(
+                    "invalid_request",
+                    "give exactly one of depth_png and depth_raw",
+                ));
+            }
+        };
+        let mask = decode("mask_png", &mask_png)?;
+        (params, depth, mask)
+    } else if kind == "multipart/form-data" {
+        // the router's DefaultBodyLimit bounds the multipart stream
+        let mut multipart = Multipart::from_request(request, &())
+            .await
+            .map_err(|e| ApiError::bad_request("malformed_multipart", e.body_text()))?;
+        let mut params = None;
+        let mut depth = None;
+        let mut mask = None;
+        while let Some(field) = multipart.next_field().await.map_err(multipart_error)? {
+            let name = field.name().unwrap_or("").to_owned();
+            let data = field.bytes().await.map_err(multipart_error)?;
+            match name.as_str() {
+                "params" => params = Some(ApiError::parse_json::<T>(&data)?),
+                "depth" => depth = Some(data.to_vec()),
+                "mask" => mask = Some(data.to_vec()),
+                other => {
+                    return Err(ApiError::unprocessable(
+                        "invalid_request",
+                        format!("unknown part {other:?} (params, depth, mask)"),
+                    ));
+                }
+            }
+        }
+        let params =
+            params.ok_or_else(|| ApiError::unprocessable("invalid_request", "no params part"))?;
+        let depth =
+            depth.ok_or_else(|| ApiError::unprocessable("invalid_request", "no depth part"))?;
+        let depth = if depth.starts_with(b"\x89PNG") {
+            DepthBytes::Png(depth)
+        } else {
+            DepthBytes::Raw(depth)
+        };
+        (params, depth, mask)
+    } else {
+        return Err(ApiError::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "unsupported_media_type",
+            format!("content type {kind:?}: send application/json or multipart/form-data"),
+        ));
+    })
+}
+
 /// The default `max_size` of a depth frame's object (metres with a metres-per-unit
 /// depth scale): no table-top object is larger.
 pub const DEFAULT_MAX_SIZE: f64 = 2.0;
@@ -726,9 +760,60 @@ fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
     }
 }
 
-enum DepthBytes {
+pub(super) enum DepthBytes {
     Png(Vec<u8>),
     Raw(Vec<u8>),
+}
+
+/// What a request says of its depth frame, apart from the images.
+pub(super) struct Frame {
+    pub intrinsics: Option<PinholeIntrinsics>,
+    pub depth_scale: Option<f64>,
+    pub size: Option<(u32, u32)>,
+    pub roi: Option<Roi>,
+    pub depth_range: Option<[f64; 2]>,
+}
+
+impl Frame {
+    /// The frame decoded and its selected pixels (ROI, mask, depth range) back-projected
+    /// into the camera's optical frame; the image, and whether a mask was given.
+    pub fn back_project(
+        &self,
+        state: &AppState,
+        depth: DepthBytes,
+        mask: Option<Vec<u8>>,
+    ) -> Result<(crate::scene::table::Pixels, crate::synth::DepthImage, bool), ApiError> {
+        let intrinsics = self.intrinsics.ok_or_else(|| {
+            ApiError::unprocessable(
+                "invalid_depth_options",
+                "intrinsics {fx, fy, cx, cy} are required",
+            )
+        })?;
+        let scale = self.depth_scale.unwrap_or_else(depth::default_depth_scale);
+        let image = match depth {
+            DepthBytes::Png(png) => depth::decode_depth_png(&png, scale, self.size, limits(state))?,
+            DepthBytes::Raw(raw) => {
+                let (w, h) = self.size.ok_or_else(|| {
+                    ApiError::unprocessable(
+                        "invalid_depth_options",
+                        "raw depth needs width and height",
+                    )
+                })?;
+                depth::decode_depth_raw(&raw, w, h, scale, limits(state))?
+            }
+        };
+        let mask = mask
+            .map(|m| depth::decode_mask_png(&m, image.width, image.height, limits(state)))
+            .transpose()?;
+        let options = DepthOptions {
+            intrinsics,
+            depth_scale: scale,
+            roi: self.roi,
+            depth_range: self.depth_range,
+        };
+        let selected = depth::back_project_pixels(&image, &options, mask.as_deref())?;
+        Ok((selected, image, mask.is_some()))
+    }
 }
 
 /// The frame's selected pixels back-projected, and notes for the report (an ROI clipped
@@ -739,39 +824,19 @@ fn depth_points(
     depth: DepthBytes,
     mask: Option<Vec<u8>>,
 ) -> Result<(Vec<DVec3>, Vec<String>, Option<crate::model::Plane>), ApiError> {
-    let intrinsics = params.intrinsics.ok_or_else(|| {
-        ApiError::unprocessable(
-            "invalid_depth_options",
-            "intrinsics {fx, fy, cx, cy} are required",
-        )
-    })?;
-    let scale = params
-        .depth_scale
-        .unwrap_or_else(depth::default_depth_scale);
-    let size = params.width.zip(params.height);
-    let image = match depth {
-        DepthBytes::Png(png) => depth::decode_depth_png(&png, scale, size, limits(state))?,
-        DepthBytes::Raw(raw) => {
-            let (w, h) = size.ok_or_else(|| {
-                ApiError::unprocessable("invalid_depth_options", "raw depth needs width and height")
-            })?;
-            depth::decode_depth_raw(&raw, w, h, scale, limits(state))?
-        }
-    };
-    let mask = mask
-        .map(|m| depth::decode_mask_png(&m, image.width, image.height, limits(state)))
-        .transpose()?;
-    let options = DepthOptions {
-        intrinsics,
-        depth_scale: scale,
+    let frame = Frame {
+        intrinsics: params.intrinsics,
+        depth_scale: params.depth_scale,
+        size: params.width.zip(params.height),
         roi: params.roi,
         depth_range: params.depth_range,
     };
-    let selected = depth::back_project_pixels(&image, &options, mask.as_deref())?;
+    let (selected, image, has_mask) = frame.back_project(state, depth, mask)?;
+    let intrinsics = params.intrinsics.expect("checked by back_project");
     let mut notes: Vec<String> = Vec::new();
     let mut table = None;
     // a box without a mask holds the table around the object: take it away
-    let points = if params.roi.is_some() && mask.is_none() {
+    let points = if params.roi.is_some() && !has_mask {
         use crate::scene::table::{TableOutcome, remove_table};
         match remove_table(&selected, params.options.seed.unwrap_or(0)) {
             TableOutcome::NoTable => selected.points,
@@ -793,7 +858,7 @@ fn depth_points(
         selected.points
     };
     let pixels = image.width as f64 * image.height as f64;
-    if params.roi.is_none() && mask.is_none() && points.len() as f64 > WHOLE_FRAME_SHARE * pixels {
+    if params.roi.is_none() && !has_mask && points.len() as f64 > WHOLE_FRAME_SHARE * pixels {
         return Err(ApiError::unprocessable(
             "whole_frame",
             format!(

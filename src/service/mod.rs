@@ -16,6 +16,7 @@ pub mod fitter;
 pub mod geometry;
 pub mod metrics;
 pub mod openapi;
+pub mod scene;
 
 pub use config::ServiceConfig;
 

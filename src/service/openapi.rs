@@ -3,7 +3,7 @@
 //! a client (or a fuzzer: `scripts/api-fuzz` runs schemathesis) that keeps to the
 //! document is never refused for the form of its request: fixed array lengths (`[f64;
 //! 3]` is an array of any length to utoipa), integers' ranges, the known shape's names,
-//! the text forms of query options, the depth route's one depth image and its
+//! the text forms of query options, the depth routes' one depth image and their
 //! multipart parts.
 
 use crate::fit::SHAPE_NAMES;
@@ -16,6 +16,8 @@ const FIXED_LENGTHS: &[(&str, &str, &[u64])] = &[
     ("FitRequest", "points", &[0, 3]),
     ("FitRequestOptions", "axis", &[3]),
     ("DepthFitRequest", "depth_range", &[2]),
+    ("SceneRequest", "depth_range", &[2]),
+    ("SceneObject", "pixel_box", &[4]),
     ("PoseIn", "translation", &[3]),
     ("PoseIn", "quaternion_wxyz", &[4]),
     ("PoseOut", "translation", &[3]),
@@ -69,28 +71,25 @@ fn build() -> Value {
         "properties": names,
         "additionalProperties": false
     });
-    // exactly one depth image, as a string (a null one is no image)
-    schemas["DepthFitRequest"]["oneOf"] = json!([
-        {"required": ["depth_png"], "properties": {"depth_png": {"type": "string"}}},
-        {"required": ["depth_raw"], "properties": {"depth_raw": {"type": "string"}}}
-    ]);
-    let params = multipart_params(&schemas["DepthFitRequest"]);
-    let depth = &mut doc["paths"]["/v1/fit/depth"]["post"]["requestBody"]["content"];
-    depth["multipart/form-data"] = json!({
-        "schema": {
-            "type": "object",
-            "required": ["depth", "params"],
-            "additionalProperties": false,
-            "properties": {
-                "depth": {"type": "string", "format": "binary",
-                          "description": "16-bit grayscale PNG, or raw little-endian u16 with width and height in params"},
-                "mask": {"type": "string", "format": "binary",
-                         "description": "mask PNG (1- to 16-bit grayscale, non-zero keeps the pixel)"},
-                "params": params
-            }
-        },
-        "encoding": {"params": {"contentType": "application/json"}}
-    });
+    for (request, path) in [
+        ("DepthFitRequest", "/v1/fit/depth"),
+        ("SceneRequest", "/v1/scene"),
+    ] {
+        depth_frame_request(&mut doc, request, path);
+    }
+    let scene = &mut doc["components"]["schemas"]["SceneOptions"]["properties"];
+    for (field, least, most) in [
+        ("min_points", crate::fit::MIN_POINTS as u64, u32::MAX as u64),
+        ("max_objects", 1, super::scene::MAX_OBJECTS as u64),
+    ] {
+        let f = &mut scene[field];
+        assert!(f.is_object(), "no SceneOptions.{field} in the document");
+        f["minimum"] = json!(least);
+        f["maximum"] = json!(most);
+        if let Some(f) = f.as_object_mut() {
+            f.remove("format");
+        }
+    }
     // query options in their text forms: `axis=0,0,1`, `viewpoint=auto`, `known=a1:0.05`
     if let Some(parameters) = doc["paths"]["/v1/fit"]["post"]["parameters"].as_array_mut() {
         for p in parameters.iter_mut() {
@@ -108,6 +107,37 @@ fn build() -> Value {
     }
     bound_integers(&mut doc);
     doc
+}
+
+/// A depth frame's request: exactly one depth image, as a string (a null one is no
+/// image), and its multipart form's parts.
+fn depth_frame_request(doc: &mut Value, request: &str, path: &str) {
+    let schemas = &mut doc["components"]["schemas"];
+    schemas[request]["oneOf"] = json!([
+        {"required": ["depth_png"], "properties": {"depth_png": {"type": "string"}}},
+        {"required": ["depth_raw"], "properties": {"depth_raw": {"type": "string"}}}
+    ]);
+    let params = multipart_params(&schemas[request]);
+    let content = &mut doc["paths"][path]["post"]["requestBody"]["content"];
+    assert!(
+        content.is_object(),
+        "no request body for {path} in the document"
+    );
+    content["multipart/form-data"] = json!({
+        "schema": {
+            "type": "object",
+            "required": ["depth", "params"],
+            "additionalProperties": false,
+            "properties": {
+                "depth": {"type": "string", "format": "binary",
+                          "description": "16-bit grayscale PNG, or raw little-endian u16 with width and height in params"},
+                "mask": {"type": "string", "format": "binary",
+                         "description": "mask PNG (1- to 16-bit grayscale, non-zero keeps the pixel)"},
+                "params": params
+            }
+        },
+        "encoding": {"params": {"contentType": "application/json"}}
+    });
 }
 
 /// `known=a1:0.05,a4:2.1` (or `=`) in a query string.

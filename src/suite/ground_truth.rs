@@ -1,7 +1,8 @@
 //! The ground-truth suite: random supertoroids (`make_case`'s ranges), clouds full or
 //! single-view partial, with noise and outliers, and the success rule (centre within 5%
 //! of the size, hole axis within 5 degrees, each a_i within 10%, each eps within 0.15,
-//! up to the shape's symmetries: axis sign, and the a1/a2 swap with a quarter turn).
+//! up to the shape's symmetries: axis sign, and the a1/a2 swap with a quarter turn);
+//! superellipsoids beside them, judged by their surfaces ([`super::chamfer`]).
 
 use crate::eval::Normalization;
 use crate::fit::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, likelihood};
@@ -65,10 +66,54 @@ pub fn random_shape(rng: &mut synth::SeededRng) -> (Shape, DVec3) {
     (shape, axis)
 }
 
+/// A superellipsoid (a4 = 0) in the ranges of the model-choice suite: sizes 0.02-0.15,
+/// eps 0.1-1.9 (boxes, cans, bottles, pebbles), and a random rotation axis.
+pub fn random_superellipsoid(rng: &mut synth::SeededRng) -> (Shape, DVec3) {
+    let shape = Shape::new(
+        rng.random_range(0.02..0.15),
+        rng.random_range(0.02..0.15),
+        rng.random_range(0.02..0.15),
+        0.0,
+        rng.random_range(0.1..1.9),
+        rng.random_range(0.1..1.9),
+    );
+    let axis = DVec3::new(
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+        rng.random_range(-1.0..1.0),
+    )
+    .normalize_or(DVec3::Z);
+    (shape, axis)
+}
+
+/// What a case's object is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kind {
+    /// a supertoroid with a hole ([`random_shape`])
+    Holed,
+    /// a superellipsoid ([`random_superellipsoid`])
+    Superellipsoid,
+}
+
 /// One seeded case of the given category.
 pub fn make_case(seed: u64, partial: bool, noise: f64, outlier_fraction: f64) -> Case {
+    make_case_of(Kind::Holed, seed, partial, noise, outlier_fraction)
+}
+
+/// One seeded case of the given kind and category.
+pub fn make_case_of(
+    kind: Kind,
+    seed: u64,
+    partial: bool,
+    noise: f64,
+    outlier_fraction: f64,
+) -> Case {
     let mut rng = synth::rng(seed);
-    let (shape, axis) = random_shape(&mut rng);
+    let (shape, axis) = match kind {
+        Kind::Holed => random_shape(&mut rng),
+        Kind::Superellipsoid => random_superellipsoid(&mut rng),
+    };
     let pose = Pose::new(
         DQuat::from_axis_angle(axis, rng.random_range(-3.1..3.1)),
         DVec3::new(

@@ -1,9 +1,10 @@
 //! Synthetic, seeded point clouds with known ground truth: near-uniform surface samples,
 //! single-view renders through a pinhole camera with a z-buffer (and the depth image it
-//! produces), Gaussian noise and uniform outliers.
+//! produces), Gaussian noise and uniform outliers, and table-top scenes ([`scene`]).
 
 mod camera;
 mod sampling;
+pub mod scene;
 
 pub use camera::{Camera, DepthImage, Intrinsics, RenderedView, render_view, with_table};
 pub use sampling::{add_noise, add_outliers, sample_surface, sample_surface_on_grid, subsample};

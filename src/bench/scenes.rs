@@ -1,0 +1,249 @@
+//! Synthetic table-top scenes (`supertoroid bench scenes`): frames of 3-6 objects, with a
+//! hole and without, resting on a table and rendered by the project's camera with a
+//! D435-like sensor model ([`crate::synth::scene`]), segmented and fitted as
+//! `/v1/scene` does. Per object: found (a segment whose pixels are mostly its), and right
+//! (the true model chosen and the fit within the model-choice suite's rule); per frame:
+//! phantoms (segments mostly of table or nothing), duplicates (a second segment of one
+//! object) and the time of the whole scene.
+
+use super::Report;
+use crate::eval::{Backend, make_evaluator};
+use crate::fit::{FitOptions, Model};
+use crate::io::depth::{DepthOptions, PinholeIntrinsics, back_project_pixels};
+use crate::model::Pose;
+use crate::scene::fit::fit_scene;
+use crate::scene::objects::SceneOptions;
+use crate::suite::chamfer::{CHAMFER_BOUND, relative_chamfer};
+use crate::suite::ground_truth::compare;
+use crate::synth::scene::{FIRST_OBJECT, random_table_scene, render_scene, with_sensor_noise};
+use serde::Serialize;
+
+/// The sensor model of the suite: 1 mm of depth noise at 0.5 m (growing with the range
+/// squared), 1 mm quantisation, flying pixels at a third of the silhouette edges.
+pub const NOISE_AT_HALF_METRE: f64 = 0.001;
+pub const FLYING_SHARE: f64 = 0.3;
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SceneObjectCase {
+    pub frame: u64,
+    pub holed: bool,
+    /// pixels the object shows in the frame
+    pub visible_pixels: usize,
+    pub found: bool,
+    pub model_right: bool,
+    pub success: bool,
+    pub chamfer: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SceneFrame {
+    pub seed: u64,
+    pub objects: usize,
+    pub segments: usize,
+    /// segments mostly of table or nothing
+    pub phantoms: usize,
+    /// further segments of an object that has one already (an object split in two by
+    /// another in front of it): a second, made-up object to the robot
+    pub duplicates: usize,
+    pub total_ms: f64,
+    pub segment_ms: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ScenesReport {
+    pub machine: super::Machine,
+    pub frames: Vec<SceneFrame>,
+    pub objects: Vec<SceneObjectCase>,
+}
+
+pub fn run(
+    frames: usize,
+    seed: u64,
+    backend: Backend,
+    base: &FitOptions,
+) -> Result<ScenesReport, String> {
+    if frames == 0 {
+        return Err("--frames must be at least 1".into());
+    }
+    let mut evaluator = make_evaluator(backend, base.stage2_points).map_err(|e| e.to_string())?;
+    let bar = super::progress(frames as u64, "table-top scenes");
+    let (mut out_frames, mut out_objects) = (Vec::new(), Vec::new());
+    for f in 0..frames {
+        let frame_seed = seed + f as u64;
+        let scene = random_table_scene(frame_seed, 3 + (frame_seed % 4) as usize);
+        let rendered = render_scene(&scene, 0.001)?;
+        let depth = with_sensor_noise(
+            &rendered.depth,
+            NOISE_AT_HALF_METRE,
+            FLYING_SHARE,
+            frame_seed,
+        );
+        let k = scene.camera.intrinsics;
+        let options = DepthOptions {
+            intrinsics: PinholeIntrinsics {
+                fx: k.fx,
+                fy: k.fy,
+                cx: k.cx,
+                cy: k.cy,
+            },
+            depth_scale: depth.scale,
+            roi: None,
+            depth_range: None,
+        };
+        let pixels = back_project_pixels(&depth, &options, None).map_err(|e| e.to_string())?;
+        let fit_options = FitOptions {
+            seed: frame_seed,
+            ..base.clone()
+        };
+        let report = fit_scene(
+            evaluator.as_mut(),
+            &pixels,
+            &SceneOptions::default(),
+            &fit_options,
+        )
+        .map_err(|e| format!("frame {frame_seed}: {e}"))?;
+        // each segment's object: the label most of its pixels carry
+        let owner: Vec<Option<usize>> = report
+            .objects
+            .iter()
+            .map(|o| majority_object(&o.pixels, &rendered.labels, k.width))
+            .collect();
+        let phantoms = owner.iter().filter(|o| o.is_none()).count();
+        let owned: std::collections::HashSet<usize> = owner.iter().flatten().copied().collect();
+        let duplicates = owner.iter().flatten().count() - owned.len();
+        for (i, (shape, pose)) in scene.objects.iter().enumerate() {
+            let visible = rendered
+                .labels
+                .iter()
+                .filter(|&&l| l == FIRST_OBJECT + i as u16)
+                .count();
+            let mine = owner.iter().position(|o| *o == Some(i));
+            let fit = mine.and_then(|s| report.objects[s].fit.as_ref());
+            // the truth in the camera's optical frame, where the fit is
+            let camera = &scene.camera.pose;
+            let truth_pose = Pose::new(
+                camera.rotation.inverse() * pose.rotation,
+                camera.to_canonical(pose.translation),
+            );
+            let holed = shape.a4 > 0.0;
+            let (model_right, within, chamfer) = match fit {
+                None => (false, false, f64::NAN),
+                Some(r) => {
+                    let chamfer =
+                        relative_chamfer((shape, &truth_pose), (&r.fitted.0, &r.fitted.1));
+                    let model_right = (r.model.kind == Model::Supertoroid) == holed;
+                    let within = if holed {
+                        compare((shape, &truth_pose), (&r.fitted.0, &r.fitted.1)).success()
+                    } else {
+                        chamfer < CHAMFER_BOUND
+                    };
+                    (model_right, within, chamfer)
+                }
+            };
+            out_objects.push(SceneObjectCase {
+                frame: frame_seed,
+                holed,
+                visible_pixels: visible,
+                found: mine.is_some(),
+                model_right,
+                success: model_right && within,
+                chamfer,
+            });
+        }
+        out_frames.push(SceneFrame {
+            seed: frame_seed,
+            objects: scene.objects.len(),
+            segments: report.objects.len(),
+            phantoms,
+            duplicates,
+            total_ms: report.timing_ms.total,
+            segment_ms: report.timing_ms.segment,
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(ScenesReport {
+        machine: super::Machine::probe(),
+        frames: out_frames,
+        objects: out_objects,
+    })
+}
+
+/// The object most of the pixels show, if an object is what most of them show.
+fn majority_object(pixels: &[(u32, u32)], labels: &[u16], width: u32) -> Option<usize> {
+    let mut counts = std::collections::HashMap::new();
+    for &(u, v) in pixels {
+        *counts
+            .entry(labels[(v * width + u) as usize])
+            .or_insert(0usize) += 1;
+    }
+    let (&label, &count) = counts.iter().max_by_key(|(l, c)| (**c, **l))?;
+    (label >= FIRST_OBJECT && 2 * count > pixels.len()).then(|| (label - FIRST_OBJECT) as usize)
+}
+
+fn share(n: usize, d: usize) -> f64 {
+    100.0 * n as f64 / d.max(1) as f64
+}
+
+impl Report for ScenesReport {
+    fn name(&self) -> &'static str {
+        "scenes"
+    }
+
+    fn csv(&self) -> String {
+        let mut s = String::from("frame,holed,visible_pixels,found,model_right,success,chamfer\n");
+        for o in &self.objects {
+            s += &format!(
+                "{},{},{},{},{},{},{:.5}\n",
+                o.frame, o.holed, o.visible_pixels, o.found, o.model_right, o.success, o.chamfer
+            );
+        }
+        s
+    }
+
+    fn markdown(&self) -> String {
+        let objects = self.objects.len();
+        let found = self.objects.iter().filter(|o| o.found).count();
+        let right = self.objects.iter().filter(|o| o.success).count();
+        let model_right = self.objects.iter().filter(|o| o.model_right).count();
+        let with_phantom = self
+            .frames
+            .iter()
+            .filter(|f| f.phantoms + f.duplicates > 0)
+            .count();
+        let mut md = format!(
+            "# Table-top scenes\n\n{}\n\n{} frames of 3-6 objects on a table (640x480, D435-like: {} m depth noise at 0.5 m growing with range squared, 1 mm quantisation, flying pixels at {:.0}% of silhouette edges), fitted as `/v1/scene` does (model auto).\n\n| objects | found | model right | right (model and fit) | frames with a made-up object (of nothing, or a second of one object) |\n|---|---|---|---|---|\n| {objects} | {found} ({:.1}%) | {model_right} ({:.1}%) | {right} ({:.1}%) | {with_phantom} of {} ({:.1}%) |\n",
+            self.machine.markdown(),
+            self.frames.len(),
+            NOISE_AT_HALF_METRE,
+            100.0 * FLYING_SHARE,
+            share(found, objects),
+            share(model_right, objects),
+            share(right, objects),
+            self.frames.len(),
+            share(with_phantom, self.frames.len()),
+        );
+        for (label, holed) in [("with a hole", true), ("without", false)] {
+            let kept: Vec<_> = self.objects.iter().filter(|o| o.holed == holed).collect();
+            md += &format!(
+                "\nObjects {label}: {} of {} found, {} right.",
+                kept.iter().filter(|o| o.found).count(),
+                kept.len(),
+                kept.iter().filter(|o| o.success).count()
+            );
+        }
+        let mut times: Vec<f64> = self.frames.iter().map(|f| f.total_ms).collect();
+        times.sort_by(f64::total_cmp);
+        let mut segment: Vec<f64> = self.frames.iter().map(|f| f.segment_ms).collect();
+        segment.sort_by(f64::total_cmp);
+        if !times.is_empty() {
+            md += &format!(
+                "\n\nTime per frame (segmentation and every fit): median {:.0} ms, p95 {:.0} ms; segmentation alone median {:.0} ms.\n",
+                times[times.len() / 2],
+                times[(times.len() * 95 / 100).min(times.len() - 1)],
+                segment[segment.len() / 2]
+            );
+        }
+        md
+    }
+}

@@ -1,0 +1,212 @@
+//! Which model a cloud is: a supertoroid (one hole, or an apple's dimple: any a4) or a
+//! superellipsoid (a4 = 0, no hole: boxes, cans, bottles). With `model: auto` the cloud
+//! is fitted as both, in one batch, and the two fits are scored by the Bayesian
+//! information criterion on the noise model's likelihood (the search's objective,
+//! [`super::objective`]: seen from the fit's viewpoint where it had one, so a ring whose
+//! visible side the sensor should have seen pays for it):
+//!
+//!   BIC = 2 · n · NLL + k · ln n
+//!
+//! where NLL is the negative mean log-likelihood per point at the noise sigma that
+//! minimises it, n the points scored and k the free parameters (12 for the supertoroid:
+//! six of shape, six of pose; 11 for the superellipsoid, whose a4 is fixed). The lower
+//! BIC is chosen; the report gives both and their margin. A superellipsoid is the
+//! supertoroid at a4 = 0, so the penalty decides only where the data cannot tell them
+//! apart.
+
+use super::search::Sample;
+use super::{FitReport, inferred_view::normalised_stride};
+use serde::Serialize;
+
+/// The most points of a cloud scored (an even stride through it).
+pub const CHOICE_POINTS: usize = 1000;
+/// Free parameters of each model (shape and pose; the noise sigma is common to both).
+pub const SUPERTOROID_PARAMETERS: f64 = 12.0;
+pub const SUPERELLIPSOID_PARAMETERS: f64 = 11.0;
+/// The noise sigma is searched from the smaller of the two fits' own estimates over this
+/// factor to the larger times it.
+const SIGMA_RANGE: f64 = 4.0;
+/// The least sigma scored (normalised units: 0.1% of the cloud's RMS radius), below any
+/// real sensor's noise.
+pub const MIN_SIGMA: f64 = 1e-3;
+/// Golden-section steps of that search (the bracket shrinks to 0.6% of its width).
+const SIGMA_STEPS: usize = 12;
+
+/// A free fit whose a4 comes out below this is a superellipsoid (the solver stops a
+/// margin inside its bounds, not on them), and is reported with a4 = 0.
+pub const SUPERELLIPSOID_A4: f64 = 0.01;
+
+/// Whether a shape is a superellipsoid ([`SUPERELLIPSOID_A4`]).
+pub fn is_superellipsoid(shape: &crate::model::Shape) -> bool {
+    shape.a4 < SUPERELLIPSOID_A4
+}
+
+/// Which model a fit answers with.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+    utoipa::ToSchema,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Model {
+    /// both fitted, the lower BIC chosen
+    #[default]
+    Auto,
+    /// one hole or none: a4 free
+    Supertoroid,
+    /// no hole: a4 held at 0
+    Superellipsoid,
+}
+
+/// The model in a report: which, and how it was chosen.
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct ModelOut {
+    /// `supertoroid` or `superellipsoid`
+    pub kind: Model,
+    /// `requested` (the caller's `model`) or `bic`
+    pub chosen_by: String,
+    /// with `model: auto`: both models' BIC (lower is better; in nats, twice the negative
+    /// log-likelihood plus the parameters' penalty) and the margin between them
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bic: Option<Bic>,
+}
+
+#[derive(Clone, Copy, Debug, Serialize, utoipa::ToSchema)]
+pub struct Bic {
+    /// absent where the free fit itself came out a superellipsoid (a4 = 0)
+    pub supertoroid: Option<f64>,
+    pub superellipsoid: f64,
+    /// the loser's BIC minus the winner's (> 0)
+    pub margin: Option<f64>,
+    /// the points scored
+    pub points: usize,
+}
+
+impl ModelOut {
+    /// The model a fit asked for one model came out as ([`is_superellipsoid`]).
+    pub fn requested(shape: &crate::model::Shape) -> Self {
+        Self {
+            kind: if is_superellipsoid(shape) {
+                Model::Superellipsoid
+            } else {
+                Model::Supertoroid
+            },
+            chosen_by: "requested".into(),
+            bic: None,
+        }
+    }
+}
+
+/// The better of a cloud's two fits by BIC, its report's `model` saying so; its time is
+/// the batch's that made both, and the choice's.
+pub fn choose(points: &[glam::DVec3], holed: FitReport, genus0: FitReport) -> FitReport {
+    let start = std::time::Instant::now();
+    let (norm, sample) = normalised_stride(points, CHOICE_POINTS);
+    let n = sample.len() as f64;
+    // both fits are scored over one bracket of sigma, not under each fit's own noise
+    // estimate, and never below MIN_SIGMA: on a noise-free cloud two fits a rounding
+    // apart would otherwise differ by the log of their roundings' ratio at every point
+    let sigmas = [&holed, &genus0].map(|r| (r.quality.noise_sigma / norm.scale).max(MIN_SIGMA));
+    let lo = (sigmas[0].min(sigmas[1]) / SIGMA_RANGE).max(MIN_SIGMA);
+    let hi = sigmas[0].max(sigmas[1]) * SIGMA_RANGE;
+    // both under one model of the data: a view where either fit took the cloud for one
+    // (the two may settle an inferred viewpoint differently), else the points' distances
+    // alone (whether they cover the object all round is not known here)
+    let viewpoint = (holed.viewpoint.position)
+        .or(genus0.viewpoint.position)
+        .map(|p| norm.point(p.into()));
+    let scored = Sample::new(&sample, viewpoint, false);
+    let bic = |r: &FitReport| {
+        let candidate = norm.candidate(&r.fitted.0, &r.fitted.1);
+        let nll = golden_min(
+            |ln_sigma| scored.score(&candidate, ln_sigma.exp()),
+            lo.ln(),
+            hi.ln(),
+        );
+        let k = if is_superellipsoid(&r.shape) {
+            SUPERELLIPSOID_PARAMETERS
+        } else {
+            SUPERTOROID_PARAMETERS
+        };
+        // (a NaN score loses)
+        let value = 2.0 * n * nll + k * n.ln();
+        if value.is_nan() { f64::INFINITY } else { value }
+    };
+    let (holed_bic, genus0_bic) = (bic(&holed), bic(&genus0));
+    let both_ms = holed.timing_ms.total.max(genus0.timing_ms.total);
+    // a free fit that came out at a4 = 0 is a superellipsoid too: the better of the two
+    // then stands for that model, and there is no supertoroid to weigh against it
+    let (supertoroid, superellipsoid, mut chosen, kind) = if is_superellipsoid(&holed.shape) {
+        let (best, value) = if holed_bic < genus0_bic {
+            (holed, holed_bic)
+        } else {
+            (genus0, genus0_bic)
+        };
+        (None, value, best, Model::Superellipsoid)
+    } else if genus0_bic <= holed_bic {
+        (Some(holed_bic), genus0_bic, genus0, Model::Superellipsoid)
+    } else {
+        (Some(holed_bic), genus0_bic, holed, Model::Supertoroid)
+    };
+    let spent = start.elapsed().as_secs_f64() * 1e3;
+    // (the two fits ran in one batch, each timed as the whole of it)
+    chosen.timing_ms.total = both_ms + spent;
+    chosen.timing_ms.checks.insert("model_choice".into(), spent);
+    if kind == Model::Superellipsoid {
+        chosen.shape.a4 = 0.0;
+        chosen.fitted.0.a4 = 0.0;
+    }
+    chosen.model = ModelOut {
+        kind,
+        chosen_by: "bic".into(),
+        bic: Some(Bic {
+            supertoroid,
+            superellipsoid,
+            margin: supertoroid.map(|t| (t - superellipsoid).abs()),
+            points: sample.len(),
+        }),
+    };
+    chosen
+}
+
+/// The least value of a unimodal `f` on [lo, hi] by golden-section search.
+fn golden_min(f: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
+    let ratio = (5f64.sqrt() - 1.0) / 2.0;
+    let mut x1 = hi - ratio * (hi - lo);
+    let mut x2 = lo + ratio * (hi - lo);
+    let (mut f1, mut f2) = (f(x1), f(x2));
+    for _ in 0..SIGMA_STEPS {
+        if f1 <= f2 {
+            hi = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = hi - ratio * (hi - lo);
+            f1 = f(x1);
+        } else {
+            lo = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = lo + ratio * (hi - lo);
+            f2 = f(x2);
+        }
+    }
+    f1.min(f2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_golden_section_finds_a_parabolas_least_value() {
+        let least = golden_min(|x| (x - 0.3).powi(2) + 2.0, -1.0, 2.0);
+        assert!((least - 2.0).abs() < 1e-4, "{least}");
+    }
+}

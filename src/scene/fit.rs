@@ -1,0 +1,189 @@
+//! A whole scene fitted: the frame segmented into its table and objects
+//! ([`super::objects`]), then every object fitted in one batch (one lockstep solve for
+//! all, one dispatch per solver iteration on the GPU), each seen from the camera and
+//! with the caller's model (`auto` unless asked otherwise: cans and boxes beside rings).
+
+use super::objects::{SceneError, SceneOptions, Segmentation, segment};
+use super::table::Pixels;
+use crate::eval::Evaluator;
+use crate::fit::{FitError, FitOptions, FitReport, Viewpoint, ViewpointSource, fit_batch};
+use crate::model::{Plane, Pose, Shape};
+use glam::DVec3;
+use serde::Serialize;
+use std::time::Instant;
+
+/// The most points of an object handed to its fit (an even stride through them): a
+/// close object has tens of thousands of pixels, and the fit's samples and final
+/// refinement use a few thousand.
+pub const MAX_OBJECT_POINTS: usize = 4000;
+
+/// A fitted object may reach below the table by this share of its size before its
+/// report says so (noise and a rounded bottom edge reach a little below).
+pub const BELOW_TABLE_SHARE: f64 = 0.05;
+
+/// One object of a scene: where it is in the frame and its fit (or why it has none).
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct SceneObject {
+    /// its index in `objects` (largest first)
+    pub id: usize,
+    /// its points in the frame
+    pub points: usize,
+    /// [x, y, width, height] in pixels
+    pub pixel_box: [u32; 4],
+    /// its pixels (column, row)
+    #[serde(skip)]
+    pub pixels: Vec<(u32, u32)>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit: Option<FitReport>,
+    /// why it could not be fitted
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+#[derive(Clone, Debug, Default, Serialize, utoipa::ToSchema)]
+pub struct SceneTiming {
+    /// the table found and the objects split apart
+    pub segment: f64,
+    /// all objects' fits (one batch)
+    pub fit: f64,
+    pub total: f64,
+}
+
+/// A scene: its table, its objects, and where the time went (milliseconds).
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct SceneReport {
+    /// the table's plane in the camera's frame, its normal towards the camera
+    pub plane: Plane,
+    pub table_points: usize,
+    pub objects: Vec<SceneObject>,
+    /// clusters above the table dropped as too small or too large for an object
+    pub dropped_clusters: usize,
+    pub timing_ms: SceneTiming,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum SceneFitError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    /// the evaluator failed (all objects at once)
+    #[error(transparent)]
+    Fit(#[from] FitError),
+}
+
+/// Segments a frame's back-projected pixels (camera frame) and fits every object.
+pub fn fit_scene(
+    evaluator: &mut dyn Evaluator,
+    frame: &Pixels,
+    scene: &SceneOptions,
+    options: &FitOptions,
+) -> Result<SceneReport, SceneFitError> {
+    let start = Instant::now();
+    let segmentation = segment(frame, scene, options.seed)?;
+    let segment_ms = start.elapsed().as_secs_f64() * 1e3;
+    let clouds = object_clouds(&segmentation);
+    let options = as_seen_by_the_camera(options);
+    let batch: Vec<(&[DVec3], &FitOptions)> =
+        clouds.iter().map(|c| (c.as_slice(), &options)).collect();
+    let fits = fit_batch(evaluator, &batch)?
+        .into_iter()
+        .map(|r| r.map_err(|e| e.to_string()))
+        .collect();
+    Ok(assemble(segmentation, fits, segment_ms, start))
+}
+
+/// Each object's points as its fit gets them: at most [`MAX_OBJECT_POINTS`], an even
+/// stride through them.
+pub fn object_clouds(segmentation: &Segmentation) -> Vec<Vec<DVec3>> {
+    segmentation
+        .objects
+        .iter()
+        .map(|o| {
+            let step = o.points.len().div_ceil(MAX_OBJECT_POINTS).max(1);
+            o.points.iter().step_by(step).copied().collect()
+        })
+        .collect()
+}
+
+/// The options with the camera (the origin of the frame) as the viewpoint, unless the
+/// caller said otherwise.
+pub fn as_seen_by_the_camera(options: &FitOptions) -> FitOptions {
+    FitOptions {
+        viewpoint: match options.viewpoint {
+            Viewpoint::Auto => Viewpoint::At(DVec3::ZERO, ViewpointSource::Camera),
+            given => given,
+        },
+        ..options.clone()
+    }
+}
+
+/// The scene's report from its segmentation and its objects' fits (in order), timed
+/// from `start`.
+pub fn assemble(
+    segmentation: Segmentation,
+    fits: Vec<Result<FitReport, String>>,
+    segment_ms: f64,
+    start: Instant,
+) -> SceneReport {
+    let Segmentation {
+        plane,
+        table_points,
+        objects,
+        dropped,
+    } = segmentation;
+    let objects = objects
+        .into_iter()
+        .zip(fits)
+        .enumerate()
+        .map(|(id, (segment, fit))| {
+            let (fit, error) = match fit {
+                Ok(mut r) => {
+                    r.warnings.extend(below_table_warning(&r.fitted, &plane));
+                    (Some(r), None)
+                }
+                Err(e) => (None, Some(e)),
+            };
+            SceneObject {
+                id,
+                points: segment.points.len(),
+                pixel_box: segment.pixel_box(),
+                pixels: segment.pixels,
+                fit,
+                error,
+            }
+        })
+        .collect();
+    let total = start.elapsed().as_secs_f64() * 1e3;
+    SceneReport {
+        plane,
+        table_points,
+        objects,
+        dropped_clusters: dropped,
+        timing_ms: SceneTiming {
+            segment: segment_ms,
+            fit: total - segment_ms,
+            total,
+        },
+    }
+}
+
+/// How far a fitted surface reaches below the plane (0 where it stays above), from a
+/// grid of its surface points.
+pub fn depth_below(shape: &Shape, pose: &Pose, plane: &Plane) -> f64 {
+    crate::grasp::surface::grid(shape, pose, 24, 48)
+        .iter()
+        .map(|q| -plane.signed_distance(DVec3::from(q.point)))
+        .fold(0.0, f64::max)
+}
+
+/// The warning of a fit that reaches through the table ([`BELOW_TABLE_SHARE`]).
+fn below_table_warning(fitted: &(Shape, Pose), plane: &Plane) -> Option<String> {
+    let below = depth_below(&fitted.0, &fitted.1, plane);
+    (below > BELOW_TABLE_SHARE * fitted.0.size()).then(|| {
+        format!(
+            "through the table: the fitted surface reaches {below:.3} below the table's plane \
+             ({:.0}% of its size); an object on the table does not, so its hidden side is \
+             likely off",
+            100.0 * below / fitted.0.size()
+        )
+    })
+}

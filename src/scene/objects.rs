@@ -1,0 +1,253 @@
+//! The objects on a table in a depth frame: the table's plane found over the frame (a
+//! seeded RANSAC on an even stride of its pixels, [`super::plane`]), its points and
+//! everything below it taken away, and what stands above it split into objects by
+//! Euclidean clustering on a k-d tree (`kiddo`): points closer than a gap join one
+//! object. Clusters too small to fit (specks, flying pixels at silhouettes) are dropped,
+//! and so are those too large to be a table-top object (a wall behind the table).
+//!
+//! Objects that touch one another join one cluster: a known limit of clustering by
+//! distance, which a detector's masks (one `/v1/fit/depth` request each) do not have.
+
+use super::plane::{PlaneFit, fit_plane};
+use super::table::{Pixels, TABLE_TOLERANCE};
+use crate::model::Plane;
+use glam::DVec3;
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use serde::{Deserialize, Serialize};
+
+/// The most points the plane's RANSAC looks at (an even stride of the frame).
+const PLANE_POINTS: usize = 20_000;
+/// The table must hold at least this share of the frame's points (a table filling a
+/// fifth of a frame is the least a table-top scene shows).
+pub const MIN_TABLE_SHARE: f64 = 0.15;
+/// The gap that splits objects, as a share of the depth (1 cm at 1 m): about eight
+/// pixel footprints of a 640-pixel-wide sensor, wider than the holes its noise and
+/// dropouts leave in one surface, narrower than the space between two objects set
+/// apart on a table.
+pub const GAP_SHARE: f64 = 0.01;
+
+/// What the caller may set about a scene.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct SceneOptions {
+    /// the fewest points an object keeps (fewer: a speck, dropped)
+    pub min_points: usize,
+    /// the smallest object, its bounding-box half-diagonal in the depth's scaled unit
+    /// (metres by default); smaller clusters are dropped
+    pub min_size: f64,
+    /// the largest object (likewise); larger clusters (a wall, the floor) are dropped
+    pub max_size: f64,
+    /// the most objects a scene may hold (more: 422 `too_many_objects`)
+    pub max_objects: usize,
+}
+
+impl Default for SceneOptions {
+    fn default() -> Self {
+        Self {
+            min_points: 100,
+            min_size: 0.01,
+            max_size: 0.5,
+            max_objects: 16,
+        }
+    }
+}
+
+/// One object's points, with their pixels.
+#[derive(Clone, Debug)]
+pub struct Segment {
+    pub points: Vec<DVec3>,
+    pub pixels: Vec<(u32, u32)>,
+}
+
+impl Segment {
+    /// The pixel box [x, y, width, height] of the object.
+    pub fn pixel_box(&self) -> [u32; 4] {
+        let (mut u0, mut v0, mut u1, mut v1) = (u32::MAX, u32::MAX, 0, 0);
+        for &(u, v) in &self.pixels {
+            (u0, v0, u1, v1) = (u0.min(u), v0.min(v), u1.max(u), v1.max(v));
+        }
+        [u0, v0, u1 - u0 + 1, v1 - v0 + 1]
+    }
+}
+
+/// A frame split into its table and the objects on it.
+#[derive(Clone, Debug)]
+pub struct Segmentation {
+    /// the table's plane, its normal towards the camera
+    pub plane: Plane,
+    pub table_points: usize,
+    /// largest first
+    pub objects: Vec<Segment>,
+    /// clusters dropped as too small or too large
+    pub dropped: usize,
+}
+
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SceneError {
+    #[error("no table: the largest plane holds {share:.0}% of the points (at least {min:.0}% needed)", share = 100.0 * share, min = 100.0 * MIN_TABLE_SHARE)]
+    NoPlane { share: f64 },
+    #[error(
+        "nothing stands on the table: {dropped} clusters above it, each too small or too large for an object"
+    )]
+    NoObject { dropped: usize },
+    #[error("{found} objects on the table, more than max_objects {max}")]
+    TooManyObjects { found: usize, max: usize },
+}
+
+/// The table and the objects on it, from a frame's back-projected pixels (the camera's
+/// optical frame: the camera at the origin, depth along z).
+pub fn segment(
+    frame: &Pixels,
+    options: &SceneOptions,
+    seed: u64,
+) -> Result<Segmentation, SceneError> {
+    let points = &frame.points;
+    let depth = median_depth(points);
+    let tolerance = TABLE_TOLERANCE * depth;
+    let stride: Vec<DVec3> = points
+        .iter()
+        .step_by(points.len().div_ceil(PLANE_POINTS).max(1))
+        .copied()
+        .collect();
+    let Some(PlaneFit {
+        plane,
+        inlier_count,
+        ..
+    }) = fit_plane(&stride, tolerance, seed)
+    else {
+        return Err(SceneError::NoPlane { share: 0.0 });
+    };
+    let share = inlier_count as f64 / stride.len().max(1) as f64;
+    if share < MIN_TABLE_SHARE {
+        return Err(SceneError::NoPlane { share });
+    }
+    let plane = towards_the_camera(plane);
+    let above: Vec<usize> = (0..points.len())
+        .filter(|&i| plane.signed_distance(points[i]) > tolerance)
+        .collect();
+    let table_points = points
+        .iter()
+        .filter(|&&p| plane.signed_distance(p).abs() <= tolerance)
+        .count();
+    let above_points: Vec<DVec3> = above.iter().map(|&i| points[i]).collect();
+    let clusters = euclidean_clusters(&above_points, GAP_SHARE * median_depth(&above_points));
+    let mut objects = Vec::new();
+    let mut dropped = 0;
+    for cluster in clusters {
+        let segment = Segment {
+            points: cluster.iter().map(|&i| above_points[i]).collect(),
+            pixels: cluster.iter().map(|&i| frame.pixels[above[i]]).collect(),
+        };
+        let size = half_diagonal(&segment.points);
+        if segment.points.len() < options.min_points
+            || size < options.min_size
+            || size > options.max_size
+        {
+            dropped += 1;
+        } else {
+            objects.push(segment);
+        }
+    }
+    if objects.is_empty() {
+        return Err(SceneError::NoObject { dropped });
+    }
+    if objects.len() > options.max_objects {
+        return Err(SceneError::TooManyObjects {
+            found: objects.len(),
+            max: options.max_objects,
+        });
+    }
+    objects.sort_by_key(|o| std::cmp::Reverse(o.points.len()));
+    Ok(Segmentation {
+        plane,
+        table_points,
+        objects,
+        dropped,
+    })
+}
+
+/// The plane with its normal towards the origin (the camera).
+fn towards_the_camera(plane: Plane) -> Plane {
+    if plane.signed_distance(DVec3::ZERO) < 0.0 {
+        Plane {
+            normal: (-plane.normal()).to_array(),
+            offset: -plane.offset,
+        }
+    } else {
+        plane
+    }
+}
+
+fn median_depth(points: &[DVec3]) -> f64 {
+    if points.is_empty() {
+        return 0.0;
+    }
+    let mut z: Vec<f64> = points.iter().map(|p| p.z).collect();
+    *z.select_nth_unstable_by(points.len() / 2, f64::total_cmp).1
+}
+
+/// Half the diagonal of the points' axis-aligned box.
+fn half_diagonal(points: &[DVec3]) -> f64 {
+    let (lo, hi) = points.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+    );
+    0.5 * (hi - lo).length()
+}
+
+/// The points' clusters (indices, each in increasing order): points within `gap` of
+/// one another join, transitively (a flood fill over radius queries).
+pub fn euclidean_clusters(points: &[DVec3], gap: f64) -> Vec<Vec<usize>> {
+    let entries: Vec<[f64; 3]> = points.iter().map(|p| p.to_array()).collect();
+    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&entries) else {
+        return Vec::new();
+    };
+    let mut label = vec![usize::MAX; points.len()];
+    let mut clusters = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..points.len() {
+        if label[start] != usize::MAX {
+            continue;
+        }
+        let id = clusters.len();
+        label[start] = id;
+        stack.push(start);
+        let mut members = Vec::new();
+        while let Some(i) = stack.pop() {
+            members.push(i);
+            let near = tree
+                .query(&entries[i])
+                .within::<SquaredEuclidean<f64>>(gap * gap)
+                .unsorted()
+                .execute();
+            for n in near {
+                let j = n.item as usize;
+                if label[j] == usize::MAX {
+                    label[j] = id;
+                    stack.push(j);
+                }
+            }
+        }
+        members.sort_unstable();
+        clusters.push(members);
+    }
+    clusters
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn points_closer_than_the_gap_join_and_farther_ones_do_not() {
+        let mut points: Vec<DVec3> = (0..20)
+            .map(|i| DVec3::new(i as f64 * 0.004, 0.0, 1.0))
+            .collect();
+        points.extend((0..10).map(|i| DVec3::new(0.2 + i as f64 * 0.004, 0.0, 1.0)));
+        let clusters = euclidean_clusters(&points, 0.005);
+        assert_eq!(clusters.len(), 2);
+        assert_eq!(clusters[0], (0..20).collect::<Vec<_>>());
+        assert_eq!(clusters[1], (20..30).collect::<Vec<_>>());
+        assert_eq!(euclidean_clusters(&points, 0.003).len(), 30);
+    }
+}
