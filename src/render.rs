@@ -1,6 +1,7 @@
 //! Pictures of a cloud with its fitted surface, rendered headless with the project's own
 //! wgpu context (works on lavapipe): three orthographic views side by side — along the
-//! hole axis, from the side, and oblique — into a PNG.
+//! hole axis, from the side, and oblique — into a PNG. A scene is drawn the same way
+//! about its table's normal, each object's points and surface in a colour of its own.
 //!
 //! The host does the shading (Lambert on the mesh's normals, points coloured by their
 //! distance to the fit), so the shader (`shaders/render.wgsl`) only transforms.
@@ -34,7 +35,29 @@ struct ViewUniform {
 pub struct Scene<'a> {
     pub points: &'a [DVec3],
     pub fit: Option<(Shape, Pose)>,
+    /// a whole scene instead: every object's fitted surface, the points coloured by the
+    /// object they belong to (`owners[i]`, an index into `objects`), the views about the
+    /// table's normal `up` (from above, from the side, oblique)
+    pub objects: Option<SceneObjects<'a>>,
 }
+
+pub struct SceneObjects<'a> {
+    pub fits: &'a [(Shape, Pose)],
+    pub owners: &'a [usize],
+    pub up: DVec3,
+}
+
+/// Distinct colours for the objects of a scene, in turn.
+const OBJECT_COLOURS: [[f32; 3]; 8] = [
+    [0.90, 0.30, 0.25],
+    [0.25, 0.60, 0.90],
+    [0.35, 0.75, 0.35],
+    [0.95, 0.70, 0.20],
+    [0.65, 0.40, 0.85],
+    [0.20, 0.80, 0.80],
+    [0.90, 0.45, 0.70],
+    [0.60, 0.60, 0.60],
+];
 
 /// Renders three `view_size`-pixel square views side by side and returns the PNG bytes
 /// (width 3·view_size, height view_size).
@@ -42,7 +65,7 @@ pub fn render_png(scene: &Scene, view_size: u32) -> Result<Vec<u8>, String> {
     if !(16..=4096).contains(&view_size) {
         return Err("view size must be in 16..=4096 pixels".into());
     }
-    if scene.points.is_empty() && scene.fit.is_none() {
+    if scene.points.is_empty() && scene.fit.is_none() && scene.objects.is_none() {
         return Err("nothing to draw".into());
     }
     let ctx = GpuContext::shared(&AdapterChoice::from_env()).map_err(|e| e.to_string())?;
@@ -71,8 +94,18 @@ fn view_frame(scene: &Scene) -> (DMat3, DVec3, f64) {
         lo = lo.min(*p);
         hi = hi.max(*p);
     }
-    let (frame, centre) = match &scene.fit {
-        Some((shape, pose)) => {
+    let (frame, centre) = match (&scene.fit, &scene.objects) {
+        (_, Some(objects)) => {
+            for (shape, pose) in objects.fits {
+                let e = shape.half_extents().max_element();
+                lo = lo.min(pose.translation - DVec3::splat(e));
+                hi = hi.max(pose.translation + DVec3::splat(e));
+            }
+            let z = objects.up.normalize();
+            let (x, y) = z.any_orthonormal_pair();
+            (DMat3::from_cols(x, y, z), 0.5 * (lo + hi))
+        }
+        (Some((shape, pose)), None) => {
             let e = shape.half_extents();
             for corner in [-1.0, 1.0] {
                 lo = lo.min(pose.translation + DVec3::splat(corner * e.max_element()));
@@ -80,7 +113,7 @@ fn view_frame(scene: &Scene) -> (DMat3, DVec3, f64) {
             }
             (pose.matrix(), pose.translation)
         }
-        None => (DMat3::IDENTITY, 0.5 * (lo + hi)),
+        (None, None) => (DMat3::IDENTITY, 0.5 * (lo + hi)),
     };
     let radius = scene
         .points
@@ -98,31 +131,37 @@ fn render_rgba(ctx: &Arc<GpuContext>, scene: &Scene, size: u32) -> Result<Vec<u8
     let local = |p: DVec3| (p - centre).as_vec3().to_array();
 
     let light = (frame * DVec3::new(0.4, -0.5, 0.8)).normalize();
-    let mesh_vertices: Vec<Vertex>;
+    let mut mesh_vertices: Vec<Vertex> = Vec::new();
     let mut mesh_indices: Vec<u32> = Vec::new();
     let mut point_colors = vec![[1.0f32, 0.55, 0.1]; scene.points.len()];
-    if let Some((shape, pose)) = &scene.fit {
+    let mut add_mesh = |shape: &Shape, pose: &Pose, tint: [f32; 3]| {
         let mesh = tessellate(shape, pose, 64, 128);
-        mesh_vertices = mesh
-            .vertices
-            .iter()
-            .zip(&mesh.normals)
-            .map(|(v, n)| {
-                let shade = (0.35 + 0.65 * n.dot(light).abs()) as f32;
-                Vertex {
-                    position: local(*v),
-                    color: [0.55 * shade, 0.65 * shade, 0.8 * shade],
-                }
-            })
-            .collect();
-        mesh_indices = mesh.triangles.iter().flatten().copied().collect();
+        let first = mesh_vertices.len() as u32;
+        mesh_vertices.extend(mesh.vertices.iter().zip(&mesh.normals).map(|(v, n)| {
+            let shade = (0.35 + 0.65 * n.dot(light).abs()) as f32;
+            Vertex {
+                position: local(*v),
+                color: tint.map(|c| c * shade),
+            }
+        }));
+        mesh_indices.extend(mesh.triangles.iter().flatten().map(|i| first + i));
+    };
+    if let Some(objects) = &scene.objects {
+        for (k, (shape, pose)) in objects.fits.iter().enumerate() {
+            // the surface a paler shade of its points' colour
+            let tint = OBJECT_COLOURS[k % OBJECT_COLOURS.len()].map(|c| 0.5 + 0.4 * c);
+            add_mesh(shape, pose, tint);
+        }
+        for (c, &owner) in point_colors.iter_mut().zip(objects.owners) {
+            *c = OBJECT_COLOURS[owner % OBJECT_COLOURS.len()];
+        }
+    } else if let Some((shape, pose)) = &scene.fit {
+        add_mesh(shape, pose, [0.55, 0.65, 0.8]);
         let scale = 0.05 * shape.size();
         for (c, p) in point_colors.iter_mut().zip(scene.points) {
             let d = meridian_distance(shape, pose.to_canonical(*p)).distance;
             *c = colormap((d / scale).min(1.0)).map(|v| v as f32 / 255.0);
         }
-    } else {
-        mesh_vertices = Vec::new();
     }
     let points: Vec<Vertex> = scene
         .points

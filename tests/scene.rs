@@ -411,7 +411,8 @@ fn the_scene_route_answers_the_table_and_its_objects_and_refuses_what_is_no_scen
             "depth_png": png(d),
             "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
             "scene": scene,
-            "options": {"seed": 1, "time_budget_ms": 500}
+            "options": {"seed": 1, "time_budget_ms": 500,
+                        "grasps": {"gripper": {"max_opening": 0.08, "finger_depth": 0.045, "finger_width": 0.02}}}
         })
     };
     let r = c
@@ -482,6 +483,7 @@ fn the_scene_command_prints_the_objects_that_export_reads_and_refuses_a_bare_tab
                 &format!("{},{},{},{}", k.fx, k.fy, k.cx, k.cy),
             ])
             .args(["--meshes", dir.join("meshes").to_str().unwrap()])
+            .args(["--picture", dir.join("scene.png").to_str().unwrap()])
             .output()
             .unwrap()
     };
@@ -491,6 +493,19 @@ fn the_scene_command_prints_the_objects_that_export_reads_and_refuses_a_bare_tab
     let scene: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(scene["objects"].as_array().unwrap().len(), 2, "{scene}");
     assert!(dir.join("meshes/object-1.ply").exists());
+    // the picture: three views, each object's points in a colour of its own
+    let decoder = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(dir.join("scene.png")).unwrap(),
+    ));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!((info.width, info.height), (1200, 400));
+    let coloured = buf
+        .chunks_exact(3)
+        .filter(|p| p.iter().max().unwrap() - p.iter().min().unwrap() > 60)
+        .count();
+    assert!(coloured > 1000, "{coloured} coloured pixels");
     let json = dir.join("scene.json");
     std::fs::write(&json, &o.stdout).unwrap();
     let out = dir.join("export");

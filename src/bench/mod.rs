@@ -146,6 +146,7 @@ impl RenderTarget {
             &crate::render::Scene {
                 points,
                 fit: Some(fit),
+                objects: None,
             },
             self.size,
         )?;

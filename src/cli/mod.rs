@@ -827,6 +827,7 @@ fn render(args: RenderArgs) -> Result<(), Failure> {
         &crate::render::Scene {
             points: &points,
             fit,
+            objects: None,
         },
         args.size,
     )

@@ -54,6 +54,11 @@ pub struct SceneArgs {
     /// also write each object's fitted surface as DIR/object-ID.ply
     #[arg(long)]
     pub meshes: Option<PathBuf>,
+    /// also draw the scene into a PNG: each object's points and fitted surface in a colour
+    /// of its own, from above the table, from the side and oblique (headless GPU context;
+    /// lavapipe works)
+    #[arg(long)]
+    pub picture: Option<PathBuf>,
 }
 
 pub fn scene(args: SceneArgs) -> Result<(), Failure> {
@@ -154,9 +159,54 @@ pub fn scene(args: SceneArgs) -> Result<(), Failure> {
             }
         }
     }
+    if let Some(path) = &args.picture {
+        let png = picture(&report, &image, &options)
+            .map_err(|e| Failure::input(format!("picture: {e}")))?;
+        write_file(path, |out| {
+            out.extend_from_slice(&png);
+            Ok(())
+        })?;
+        eprintln!("wrote {}", path.display());
+    }
     println!(
         "{}",
         serde_json::to_string_pretty(&report).map_err(internal)?
     );
     Ok(())
+}
+
+/// The scene drawn: the fitted objects' points (back-projected from their pixels) in
+/// their object's colour, and their surfaces.
+fn picture(
+    report: &crate::scene::fit::SceneReport,
+    image: &crate::synth::DepthImage,
+    options: &DepthOptions,
+) -> Result<Vec<u8>, String> {
+    let k = options.intrinsics;
+    let (mut points, mut owners, mut fits) = (Vec::new(), Vec::new(), Vec::new());
+    for object in &report.objects {
+        let Some(fit) = &object.fit else { continue };
+        for &(u, v) in &object.pixels {
+            let z = image.data[(v * image.width + u) as usize] as f64 * image.scale;
+            points.push(glam::DVec3::new(
+                (u as f64 - k.cx) / k.fx * z,
+                (v as f64 - k.cy) / k.fy * z,
+                z,
+            ));
+            owners.push(fits.len());
+        }
+        fits.push(fit.fitted);
+    }
+    crate::render::render_png(
+        &crate::render::Scene {
+            points: &points,
+            fit: None,
+            objects: Some(crate::render::SceneObjects {
+                fits: &fits,
+                owners: &owners,
+                up: report.plane.normal(),
+            }),
+        },
+        400,
+    )
 }

@@ -5,6 +5,9 @@
 //! through that space to reach the point), and the evaluators charge a candidate for each
 //! one it puts inside itself (residual min(r, 0), see `eval::PointSet`).
 //!
+//! A support the object rests on (a table) says the same of the space under it: points
+//! just below the table under the sample points ([`below_support`]) join them.
+//!
 //! Tried and left out: points on the lines of sight that pass just beside the cloud's
 //! outline or through its gaps (the sensor saw past the object there), at the cloud's
 //! depths. They were all outside the true shapes, but a body grown into the unseen side
@@ -33,6 +36,27 @@ pub fn in_front(sample: &[DVec3], viewpoint: DVec3) -> Vec<DVec3> {
             let offset = IN_FRONT_OFFSETS[i % IN_FRONT_OFFSETS.len()];
             // a point closer to the sensor than the offset has no free space to spare
             (distance > 2.0 * offset).then(|| *p + to_sensor * (offset / distance))
+        })
+        .collect()
+}
+
+/// Depths below the support plane of its points (normalised units): inside the table,
+/// where the object is not, near enough to its surface to catch a body grown down
+/// through it.
+pub const BELOW_SUPPORT_OFFSETS: [f64; 2] = [0.05, 0.15];
+
+/// One point per sample point under it, inside the support (a table): the sample point
+/// projected onto the plane and moved BELOW_SUPPORT_OFFSETS[i mod 2] below it (all
+/// normalised; the plane's normal towards the object). Points already below the plane
+/// (noise, outliers) give none.
+pub fn below_support(sample: &[DVec3], normal: DVec3, offset: f64) -> Vec<DVec3> {
+    sample
+        .iter()
+        .enumerate()
+        .filter_map(|(i, p)| {
+            let height = normal.dot(*p) + offset;
+            let depth = BELOW_SUPPORT_OFFSETS[i % BELOW_SUPPORT_OFFSETS.len()];
+            (height > 0.0).then(|| *p - normal * (height + depth))
         })
         .collect()
 }

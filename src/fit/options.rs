@@ -125,6 +125,10 @@ pub struct FitOptions {
     /// in the camera's own frame). The space between it and every point is empty, so a
     /// candidate that puts solid there pays for it (see [`free_space`]).
     pub viewpoint: Viewpoint,
+    /// prior: the surface the object rests on (a table, in world units, its normal
+    /// towards the object): the object does not reach below it (see
+    /// [`free_space::below_support`])
+    pub support: Option<crate::model::Plane>,
     /// how many other downsampling seeds to try when, with a viewpoint, the fit leaves
     /// most of its visible surface without points, or the fit stays off a precise cloud
     /// (then up to [`PRECISE_MISFIT_RETRIES`] where these leave it there; see
@@ -180,6 +184,7 @@ impl Default for FitOptions {
             known_axis: None,
             known_shape: [None; 6],
             viewpoint: Viewpoint::Auto,
+            support: None,
             unseen_surface_retries: UNSEEN_SURFACE_RETRIES,
             noise_model: true,
             thorough: false,

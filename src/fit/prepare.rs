@@ -55,7 +55,8 @@ pub(super) struct Prepared<'a> {
     pub(super) norm: Normalization,
     pub(super) stage1_pts: Vec<DVec3>,
     pub(super) stage2_pts: Vec<DVec3>,
-    /// free-space points of each stage (empty without a viewpoint)
+    /// free-space points of each stage (in front of the points seen from the viewpoint,
+    /// and under them inside the support; empty without either)
     pub(super) stage1_free: Vec<DVec3>,
     pub(super) stage2_free: Vec<DVec3>,
     /// stage 1's starts, of the [`StartSet`] asked for (the hole axes across the line of
@@ -119,7 +120,7 @@ pub(super) fn prepare<'a>(
     let mut rng = synth::rng(o.seed);
     let stage1_pts = synth::subsample(&normalised, o.stage1_points, &mut rng);
     let stage2_pts = synth::subsample(&normalised, o.stage2_points, &mut rng);
-    let (stage1_free, stage2_free) = match o.viewpoint.position() {
+    let (mut stage1_free, mut stage2_free) = match o.viewpoint.position() {
         None => (Vec::new(), Vec::new()),
         Some(v) if !v.is_finite() => {
             return Err(FitError::InvalidOption(
@@ -134,6 +135,18 @@ pub(super) fn prepare<'a>(
             )
         }
     };
+    if let Some(plane) = &o.support {
+        // the plane in the normalised frame: n·(s x + c) + d = 0
+        let normal = plane.normal();
+        if !(normal.is_finite() && plane.offset.is_finite()) {
+            return Err(FitError::InvalidOption(
+                "the support plane must be finite".into(),
+            ));
+        }
+        let offset = (plane.offset + normal.dot(norm.centre)) / norm.scale;
+        stage1_free.extend(free_space::below_support(&stage1_pts, normal, offset));
+        stage2_free.extend(free_space::below_support(&stage2_pts, normal, offset));
+    }
     let bounds = o.bounds();
     let paper = o.method == Method::Paper;
     let (a4_reward, hole_preference) = if paper {

@@ -1,7 +1,7 @@
 //! A whole scene fitted: the frame segmented into its table and objects
 //! ([`super::objects`]), then every object fitted in one batch (one lockstep solve for
-//! all, one dispatch per solver iteration on the GPU), each seen from the camera and
-//! with the caller's model (`auto` unless asked otherwise: cans and boxes beside rings).
+//! all, one dispatch per solver iteration on the GPU), each seen from the camera, kept
+//! above the table (the fit's `support`) and with the caller's model (`auto` unless asked otherwise: cans and boxes beside rings).
 
 use super::objects::{SceneError, SceneOptions, Segmentation, segment};
 use super::table::Pixels;
@@ -38,6 +38,10 @@ pub struct SceneObject {
     /// why it could not be fitted
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// parallel-jaw grasps on the fit, where the request asked for them (the table is
+    /// their support plane)
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub grasps: Option<crate::grasp::GraspsOut>,
 }
 
 #[derive(Clone, Debug, Default, Serialize, utoipa::ToSchema)]
@@ -81,7 +85,7 @@ pub fn fit_scene(
     let segmentation = segment(frame, scene, options.seed)?;
     let segment_ms = start.elapsed().as_secs_f64() * 1e3;
     let clouds = object_clouds(&segmentation);
-    let options = as_seen_by_the_camera(options);
+    let options = object_options(options, &segmentation.plane);
     let batch: Vec<(&[DVec3], &FitOptions)> =
         clouds.iter().map(|c| (c.as_slice(), &options)).collect();
     let fits = fit_batch(evaluator, &batch)?
@@ -104,14 +108,16 @@ pub fn object_clouds(segmentation: &Segmentation) -> Vec<Vec<DVec3>> {
         .collect()
 }
 
-/// The options with the camera (the origin of the frame) as the viewpoint, unless the
-/// caller said otherwise.
-pub fn as_seen_by_the_camera(options: &FitOptions) -> FitOptions {
+/// An object's fit options: the camera (the origin of the frame) as the viewpoint,
+/// unless the caller said otherwise, and the table as the support it does not reach
+/// below.
+pub fn object_options(options: &FitOptions, table: &Plane) -> FitOptions {
     FitOptions {
         viewpoint: match options.viewpoint {
             Viewpoint::Auto => Viewpoint::At(DVec3::ZERO, ViewpointSource::Camera),
             given => given,
         },
+        support: Some(*table),
         ..options.clone()
     }
 }
@@ -149,6 +155,7 @@ pub fn assemble(
                 pixels: segment.pixels,
                 fit,
                 error,
+                grasps: None,
             }
         })
         .collect();

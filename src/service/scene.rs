@@ -8,7 +8,7 @@ use super::error::{ApiError, ErrorBody};
 use super::fitter::FitJob;
 use crate::fit::Model;
 use crate::io::depth::{PinholeIntrinsics, Roi};
-use crate::scene::fit::{SceneReport, as_seen_by_the_camera, assemble, object_clouds};
+use crate::scene::fit::{SceneReport, assemble, object_clouds, object_options};
 use crate::scene::objects::{SceneError, SceneOptions, segment};
 use axum::extract::{Request, State};
 use axum::{Extension, Json};
@@ -83,6 +83,7 @@ impl From<SceneError> for ApiError {
 /// objects by distance, and each object is fitted from the camera's viewpoint with
 /// model `auto` (supertoroid or superellipsoid by BIC) unless `options.model` says
 /// otherwise. Poses come back in the camera's optical frame (x right, y down, z forward).
+/// With `options.grasps` each fitted object also gets its grasps, kept above the table.
 #[utoipa::path(
     post, path = "/v1/scene",
     request_body(content(
@@ -107,6 +108,7 @@ pub async fn scene(
     let start = Instant::now();
     let (params, depth, mask) = read_depth_body::<SceneRequest>(&state, request).await?;
     check_scene_options(&params.scene)?;
+    let grasp_options = super::geometry::checked_grasp_options(params.options.grasps.clone())?;
     let frame = Frame {
         intrinsics: params.intrinsics,
         depth_scale: params.depth_scale,
@@ -133,7 +135,7 @@ pub async fn scene(
         .into_iter()
         .map(|points| {
             let mut job: FitJob = options.job(points, state.config.max_points)?;
-            job.options = as_seen_by_the_camera(&job.options);
+            job.options = object_options(&job.options, &segmentation.plane);
             Ok(job)
         })
         .collect::<Result<Vec<_>, ApiError>>()?;
@@ -145,7 +147,19 @@ pub async fn scene(
                 .map_err(|e| format!("{}: {}", e.code, e.message))
         })
         .collect();
-    let scene = assemble(segmentation, fits, segment_ms, start);
+    let mut scene = assemble(segmentation, fits, segment_ms, start);
+    if let Some(options) = grasp_options {
+        // the table found is the hand's floor unless the request gives another
+        let options = crate::grasp::GraspOptions {
+            plane: options.plane.or(Some(scene.plane)),
+            ..options
+        };
+        for object in &mut scene.objects {
+            if let Some(fit) = &object.fit {
+                object.grasps = Some(super::geometry::grasps_of_fit(fit, &options)?);
+            }
+        }
+    }
     for object in &scene.objects {
         for warning in object.fit.iter().flat_map(|f| &f.warnings) {
             tracing::warn!(request_id = %id.0, object = object.id, "{warning}");
