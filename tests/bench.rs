@@ -432,3 +432,67 @@ fn bench_takes_the_retries_of_fit() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(stderr.contains("--retries"), "{stderr}");
 }
+
+#[test]
+fn bench_models_judges_the_choice_between_supertoroid_and_superellipsoid() {
+    let out = out_dir("models");
+    let v = bench(
+        &[
+            "models",
+            "--cases",
+            "4",
+            "--seed",
+            "600000",
+            "--backend",
+            "cpu",
+        ],
+        &out,
+        "models",
+    );
+    assert_eq!(v["model"], "auto");
+    let cases = v["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 4);
+    // even cases holed, odd ones superellipsoids; full noise-free clouds, all right
+    for (i, c) in cases.iter().enumerate() {
+        has(
+            c,
+            &[
+                "seed",
+                "chosen",
+                "model_right",
+                "success",
+                "chamfer",
+                "t_total_ms",
+            ],
+        );
+        let kind = if i % 2 == 0 {
+            "holed"
+        } else {
+            "superellipsoid"
+        };
+        assert_eq!(c["kind"], kind, "{c}");
+        assert_eq!(c["success"], true, "{c}");
+    }
+    // one model asked for: no choice made, no margin
+    let v = bench(
+        &[
+            "models",
+            "--cases",
+            "4",
+            "--seed",
+            "600000",
+            "--backend",
+            "cpu",
+            "--model",
+            "supertoroid",
+        ],
+        &out,
+        "models",
+    );
+    assert_eq!(v["model"], "supertoroid");
+    for c in v["cases"].as_array().unwrap() {
+        assert!(c["margin"].is_null(), "{c}");
+    }
+    let auto = std::fs::read_to_string(out.join("models.csv")).unwrap();
+    assert!(auto.lines().count() == 5, "{auto}");
+}

@@ -29,6 +29,10 @@ pub struct SceneObjectCase {
     pub holed: bool,
     /// pixels the object shows in the frame
     pub visible_pixels: usize,
+    /// it shows at least the fewest points an object keeps ([`SceneOptions::min_points`]):
+    /// the rest (out of the frame, or hidden behind others) cannot be found and are left
+    /// out of the rates
+    pub in_view: bool,
     pub found: bool,
     pub model_right: bool,
     pub success: bool,
@@ -144,6 +148,7 @@ pub fn run(
                 frame: frame_seed,
                 holed,
                 visible_pixels: visible,
+                in_view: visible >= SceneOptions::default().min_points,
                 found: mine.is_some(),
                 model_right,
                 success: model_right && within,
@@ -191,32 +196,43 @@ impl Report for ScenesReport {
     }
 
     fn csv(&self) -> String {
-        let mut s = String::from("frame,holed,visible_pixels,found,model_right,success,chamfer\n");
+        let mut s =
+            String::from("frame,holed,visible_pixels,in_view,found,model_right,success,chamfer\n");
         for o in &self.objects {
             s += &format!(
-                "{},{},{},{},{},{},{:.5}\n",
-                o.frame, o.holed, o.visible_pixels, o.found, o.model_right, o.success, o.chamfer
+                "{},{},{},{},{},{},{},{:.5}\n",
+                o.frame,
+                o.holed,
+                o.visible_pixels,
+                o.in_view,
+                o.found,
+                o.model_right,
+                o.success,
+                o.chamfer
             );
         }
         s
     }
 
     fn markdown(&self) -> String {
-        let objects = self.objects.len();
-        let found = self.objects.iter().filter(|o| o.found).count();
-        let right = self.objects.iter().filter(|o| o.success).count();
-        let model_right = self.objects.iter().filter(|o| o.model_right).count();
+        let seen: Vec<&SceneObjectCase> = self.objects.iter().filter(|o| o.in_view).collect();
+        let objects = seen.len();
+        let found = seen.iter().filter(|o| o.found).count();
+        let right = seen.iter().filter(|o| o.success).count();
+        let model_right = seen.iter().filter(|o| o.model_right).count();
+        let hidden = self.objects.len() - objects;
         let with_phantom = self
             .frames
             .iter()
             .filter(|f| f.phantoms + f.duplicates > 0)
             .count();
         let mut md = format!(
-            "# Table-top scenes\n\n{}\n\n{} frames of 3-6 objects on a table (640x480, D435-like: {} m depth noise at 0.5 m growing with range squared, 1 mm quantisation, flying pixels at {:.0}% of silhouette edges), fitted as `/v1/scene` does (model auto).\n\n| objects | found | model right | right (model and fit) | frames with a made-up object (of nothing, or a second of one object) |\n|---|---|---|---|---|\n| {objects} | {found} ({:.1}%) | {model_right} ({:.1}%) | {right} ({:.1}%) | {with_phantom} of {} ({:.1}%) |\n",
+            "# Table-top scenes\n\n{}\n\n{} frames of 3-6 objects on a table (640x480, D435-like: {} m depth noise at 0.5 m growing with range squared, 1 mm quantisation, flying pixels at {:.0}% of silhouette edges), fitted as `/v1/scene` does (model auto). Objects in view (at least {} visible pixels; {hidden} more were out of the frame or hidden):\n\n| objects | found | model right | right (model and fit) | frames with a made-up object (of nothing, or a second of one object) |\n|---|---|---|---|---|\n| {objects} | {found} ({:.1}%) | {model_right} ({:.1}%) | {right} ({:.1}%) | {with_phantom} of {} ({:.1}%) |\n",
             self.machine.markdown(),
             self.frames.len(),
             NOISE_AT_HALF_METRE,
             100.0 * FLYING_SHARE,
+            SceneOptions::default().min_points,
             share(found, objects),
             share(model_right, objects),
             share(right, objects),
@@ -224,7 +240,7 @@ impl Report for ScenesReport {
             share(with_phantom, self.frames.len()),
         );
         for (label, holed) in [("with a hole", true), ("without", false)] {
-            let kept: Vec<_> = self.objects.iter().filter(|o| o.holed == holed).collect();
+            let kept: Vec<_> = seen.iter().filter(|o| o.holed == holed).collect();
             md += &format!(
                 "\nObjects {label}: {} of {} found, {} right.",
                 kept.iter().filter(|o| o.found).count(),
