@@ -530,3 +530,61 @@ fn the_scene_command_prints_the_objects_that_export_reads_and_refuses_a_bare_tab
         String::from_utf8_lossy(&o.stderr)
     );
 }
+
+/// What a detector gives (a box) and what a segmenter gives (a mask) end in the same fit:
+/// the table the box holds is taken away before the fit.
+#[test]
+fn a_detectors_box_gives_the_fit_its_mask_gives() {
+    use base64::Engine;
+    use serde_json::{Value, json};
+    let server = common::Server::start(supertoroid::service::ServiceConfig {
+        backend: supertoroid::eval::Backend::Cpu,
+        ..Default::default()
+    });
+    let shape = Shape::new(0.025, 0.02, 0.012, 2.0, 0.7, 1.0);
+    let (depth, camera, roi, pose) = table_frame(shape, DVec3::new(0.02, 0.01, 0.0));
+    let view = synth::render_view(&shape, &pose, &camera, 0.0001).unwrap();
+    let mut mask = synth::DepthImage {
+        data: vec![0; depth.data.len()],
+        ..depth.clone()
+    };
+    for [u, v] in &view.pixels {
+        mask.data[(v * mask.width + u) as usize] = 1;
+    }
+    let b64 = |d: &synth::DepthImage| {
+        base64::engine::general_purpose::STANDARD
+            .encode(supertoroid::io::depth::encode_depth_png(d))
+    };
+    let k = camera.intrinsics;
+    let body = json!({
+        "depth_png": b64(&depth), "depth_scale": 0.0001,
+        "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
+        "options": {"seed": 2}
+    });
+    let c = common::client();
+    let fit_with = |key: &str, value: Value| {
+        let mut body = body.clone();
+        body[key] = value;
+        let r = c
+            .post(server.url("/v1/fit/depth"))
+            .json(&body)
+            .send()
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 200);
+        let v: Value = r.json().unwrap();
+        let object: supertoroid::model::FittedObject = serde_json::from_value(v).unwrap();
+        object.validated().unwrap()
+    };
+    let boxed = fit_with(
+        "roi",
+        json!({"x": roi.x, "y": roi.y, "width": roi.width, "height": roi.height}),
+    );
+    let masked = fit_with("mask_png", json!(b64(&mask)));
+    let e = supertoroid::suite::ground_truth::compare((&masked.0, &masked.1), (&boxed.0, &boxed.1));
+    assert!(
+        e.centre < 0.01 && e.axis_degrees < 2.0 && e.sizes < 0.05 && e.eps < 0.1,
+        "{e:?}: box {:?} mask {:?}",
+        boxed.0,
+        masked.0
+    );
+}
