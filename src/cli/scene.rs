@@ -46,6 +46,9 @@ pub struct SceneArgs {
     pub max_size: f64,
     #[arg(long, default_value_t = SceneOptions::default().max_objects)]
     pub max_objects: usize,
+    /// keep each object's fit above the table (see `docs/scenes.md`)
+    #[arg(long)]
+    pub table_prior: bool,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// evaluator: auto, gpu, cpu
@@ -114,6 +117,7 @@ pub fn scene(args: SceneArgs) -> Result<(), Failure> {
         min_size: args.min_size,
         max_size: args.max_size,
         max_objects: args.max_objects,
+        table_prior: args.table_prior,
     };
     let fit_options = FitOptions {
         seed: args.seed,

@@ -1,7 +1,7 @@
 //! A whole scene fitted: the frame segmented into its table and objects
 //! ([`super::objects`]), then every object fitted in one batch (one lockstep solve for
-//! all, one dispatch per solver iteration on the GPU), each seen from the camera, kept
-//! above the table (the fit's `support`) and with the caller's model (`auto` unless asked otherwise: cans and boxes beside rings).
+//! all, one dispatch per solver iteration on the GPU), each seen from the camera (kept
+//! above the table on request: the fit's `support`) and with the caller's model (`auto` unless asked otherwise: cans and boxes beside rings).
 
 use super::objects::{SceneError, SceneOptions, Segmentation, segment};
 use super::table::Pixels;
@@ -85,7 +85,7 @@ pub fn fit_scene(
     let segmentation = segment(frame, scene, options.seed)?;
     let segment_ms = start.elapsed().as_secs_f64() * 1e3;
     let clouds = object_clouds(&segmentation);
-    let options = object_options(options, &segmentation.plane);
+    let options = object_options(options, &segmentation.plane, scene.table_prior);
     let batch: Vec<(&[DVec3], &FitOptions)> =
         clouds.iter().map(|c| (c.as_slice(), &options)).collect();
     let fits = fit_batch(evaluator, &batch)?
@@ -109,15 +109,15 @@ pub fn object_clouds(segmentation: &Segmentation) -> Vec<Vec<DVec3>> {
 }
 
 /// An object's fit options: the camera (the origin of the frame) as the viewpoint,
-/// unless the caller said otherwise, and the table as the support it does not reach
-/// below.
-pub fn object_options(options: &FitOptions, table: &Plane) -> FitOptions {
+/// unless the caller said otherwise, and with `table_prior` the table as the support it
+/// does not reach below.
+pub fn object_options(options: &FitOptions, table: &Plane, table_prior: bool) -> FitOptions {
     FitOptions {
         viewpoint: match options.viewpoint {
             Viewpoint::Auto => Viewpoint::At(DVec3::ZERO, ViewpointSource::Camera),
             given => given,
         },
-        support: Some(*table),
+        support: table_prior.then_some(*table),
         ..options.clone()
     }
 }

@@ -135,7 +135,8 @@ pub async fn scene(
         .into_iter()
         .map(|points| {
             let mut job: FitJob = options.job(points, state.config.max_points)?;
-            job.options = object_options(&job.options, &segmentation.plane);
+            job.options =
+                object_options(&job.options, &segmentation.plane, scene_options.table_prior);
             Ok(job)
         })
         .collect::<Result<Vec<_>, ApiError>>()?;
