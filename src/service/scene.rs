@@ -18,7 +18,9 @@ use std::time::Instant;
 use utoipa::ToSchema;
 
 /// A depth frame of a table-top scene, as JSON (or the `params` part of a multipart
-/// request, without the base64 images).
+/// request, without the base64 images). The frame's fields are `DepthFitRequest`'s,
+/// written out again: serde cannot flatten them into a struct that refuses unknown
+/// fields.
 #[derive(Clone, Debug, Default, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SceneRequest {

@@ -57,13 +57,7 @@ pub fn random_shape(rng: &mut synth::SeededRng) -> (Shape, DVec3) {
         rng.random_range(0.3..1.8),
         rng.random_range(0.3..1.8),
     );
-    let axis = DVec3::new(
-        rng.random_range(-1.0..1.0),
-        rng.random_range(-1.0..1.0),
-        rng.random_range(-1.0..1.0),
-    )
-    .normalize_or(DVec3::Z);
-    (shape, axis)
+    (shape, random_axis(rng))
 }
 
 /// A superellipsoid (a4 = 0) in the ranges of the model-choice suite: sizes 0.02-0.15,
@@ -77,13 +71,17 @@ pub fn random_superellipsoid(rng: &mut synth::SeededRng) -> (Shape, DVec3) {
         rng.random_range(0.1..1.9),
         rng.random_range(0.1..1.9),
     );
-    let axis = DVec3::new(
+    (shape, random_axis(rng))
+}
+
+/// A rotation axis drawn from the cube [-1, 1]^3, normalised.
+fn random_axis(rng: &mut synth::SeededRng) -> DVec3 {
+    DVec3::new(
         rng.random_range(-1.0..1.0),
         rng.random_range(-1.0..1.0),
         rng.random_range(-1.0..1.0),
     )
-    .normalize_or(DVec3::Z);
-    (shape, axis)
+    .normalize_or(DVec3::Z)
 }
 
 /// What a case's object is.
