@@ -521,6 +521,22 @@ fn the_scene_command_prints_the_objects_that_export_reads_and_refuses_a_bare_tab
     assert!(e.status.success(), "{}", String::from_utf8_lossy(&e.stderr));
     let mjcf = std::fs::read_to_string(out.join("scene.xml")).unwrap();
     assert_eq!(mjcf.matches("<body").count(), 2, "{mjcf}");
+    // grasps on one object of the scene, named by its id; the scene's table is the floor
+    let grasps = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_supertoroid"))
+            .args(["grasps", json.to_str().unwrap()])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let g = grasps(&["--object", "1"]);
+    assert!(g.status.success(), "{}", String::from_utf8_lossy(&g.stderr));
+    let planned: serde_json::Value = serde_json::from_slice(&g.stdout).unwrap();
+    assert!(planned["rejected"]["plane"].is_u64(), "{planned}");
+    let unnamed = grasps(&[]);
+    assert_eq!(unnamed.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&unnamed.stderr).contains("--object"));
+    assert_eq!(grasps(&["--object", "7"]).status.code(), Some(2));
     let (bare, camera) = scene_frame(700_020, 0);
     let o = run(&bare, "bare.png", &camera);
     assert_eq!(o.status.code(), Some(2));

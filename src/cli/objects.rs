@@ -41,6 +41,9 @@ pub struct GraspArgs {
     /// also print GraspNet-1Billion rows
     #[arg(long)]
     pub graspnet: bool,
+    /// the object of a file of several (a scene's `id`, else its place, from 0)
+    #[arg(long)]
+    pub object: Option<u64>,
 }
 
 #[derive(Args, Debug)]
@@ -53,6 +56,9 @@ pub struct SurfaceArgs {
     /// a cloud file: the surface points nearest to its points
     #[arg(long)]
     pub nearest: Option<PathBuf>,
+    /// the object of a file of several (a scene's `id`, else its place, from 0)
+    #[arg(long)]
+    pub object: Option<u64>,
 }
 
 #[derive(Args, Debug)]
@@ -79,6 +85,8 @@ pub struct ExportArgs {
 /// The objects (and plane, and the first fit's viewpoint) of a fits' JSON file.
 struct FitsFile {
     objects: Vec<(Shape, Pose)>,
+    /// each object's name in the file: a scene object's `id`, else its place
+    ids: Vec<u64>,
     plane: Option<Plane>,
     viewpoint: Option<DVec3>,
 }
@@ -94,14 +102,21 @@ fn read_fits(path: &Path) -> Result<FitsFile, Failure> {
         None => vec![value.clone()],
     };
     // a scene's object carries its fit under `fit` (none where it could not be fitted)
-    let items: Vec<&serde_json::Value> = items
+    let (ids, items): (Vec<u64>, Vec<&serde_json::Value>) = items
         .iter()
-        .filter_map(|item| match (item.get("fit"), item.get("error")) {
-            (Some(fit), _) => Some(fit),
-            (None, Some(_)) => None,
-            (None, None) => Some(item),
+        .enumerate()
+        .filter_map(|(place, item)| {
+            let id = item
+                .get("id")
+                .and_then(|i| i.as_u64())
+                .unwrap_or(place as u64);
+            match (item.get("fit"), item.get("error")) {
+                (Some(fit), _) => Some((id, fit)),
+                (None, Some(_)) => None,
+                (None, None) => Some((id, item)),
+            }
         })
-        .collect();
+        .unzip();
     let mut objects = Vec::new();
     for item in &items {
         let object: FittedObject =
@@ -124,6 +139,7 @@ fn read_fits(path: &Path) -> Result<FitsFile, Failure> {
         .map(DVec3::from_array);
     Ok(FitsFile {
         objects,
+        ids,
         plane,
         viewpoint,
     })
@@ -144,20 +160,34 @@ fn print_json(value: &impl serde::Serialize) -> Result<(), Failure> {
     Ok(())
 }
 
-fn one_object(file: &FitsFile, path: &Path) -> Result<(Shape, Pose), Failure> {
-    match file.objects.as_slice() {
-        [one] => Ok(*one),
-        many => Err(Failure::input(format!(
-            "{}: holds {} objects; give one fit",
+/// The file's one object, or the one `object` names.
+fn one_object(file: &FitsFile, path: &Path, object: Option<u64>) -> Result<(Shape, Pose), Failure> {
+    match (object, file.objects.as_slice()) {
+        (Some(id), objects) => file
+            .ids
+            .iter()
+            .position(|&i| i == id)
+            .map(|k| objects[k])
+            .ok_or_else(|| {
+                Failure::input(format!(
+                    "{}: no fitted object {id} (it holds {:?})",
+                    path.display(),
+                    file.ids
+                ))
+            }),
+        (None, [one]) => Ok(*one),
+        (None, many) => Err(Failure::input(format!(
+            "{}: holds {} objects; give one fit, or --object ID of {:?}",
             path.display(),
-            many.len()
+            many.len(),
+            file.ids
         ))),
     }
 }
 
 pub fn grasps(args: GraspArgs) -> Result<(), Failure> {
     let file = read_fits(&args.fit)?;
-    let (shape, pose) = one_object(&file, &args.fit)?;
+    let (shape, pose) = one_object(&file, &args.fit, args.object)?;
     let options = GraspOptions {
         gripper: Gripper {
             max_opening: args.max_opening,
@@ -190,7 +220,7 @@ pub fn grasps(args: GraspArgs) -> Result<(), Failure> {
 
 pub fn surface(args: SurfaceArgs) -> Result<(), Failure> {
     let file = read_fits(&args.fit)?;
-    let (shape, pose) = one_object(&file, &args.fit)?;
+    let (shape, pose) = one_object(&file, &args.fit, args.object)?;
     let points = match (&args.grid, &args.nearest) {
         (Some(grid), None) => {
             let (n_eta, n_omega) = grid

@@ -119,7 +119,9 @@ pub fn choose(points: &[glam::DVec3], holed: FitReport, genus0: FitReport) -> Fi
     // both under one model of the data: a view where either fit took the cloud for one
     // (the two may settle an inferred viewpoint differently), else the points' distances
     // alone (whether they cover the object all round is not known here)
-    let viewpoint = (holed.viewpoint.position)
+    let viewpoint = holed
+        .viewpoint
+        .position
         .or(genus0.viewpoint.position)
         .map(|p| norm.point(p.into()));
     let scored = Sample::new(&sample, viewpoint, false);
