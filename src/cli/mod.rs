@@ -45,8 +45,8 @@ pub enum Command {
     ///
     /// Example: supertoroid fit mug.pcd > fit.json && supertoroid mesh --fit fit.json -o mug.ply
     Mesh(MeshArgs),
-    /// Run the HTTP fitting service (POST /v1/fit, /v1/fit/depth, /v1/fit/batch, /v1/grasps,
-    /// /v1/surface; GET
+    /// Run the HTTP fitting service (POST /v1/fit, /v1/fit/depth, /v1/fit/batch, /v1/scene,
+    /// /v1/grasps, /v1/surface; GET
     /// /healthz, /readyz, /metrics, /openapi.json). Every flag also reads its
     /// SUPERTOROID_* environment variable.
     ///

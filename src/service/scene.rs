@@ -145,12 +145,13 @@ pub async fn scene(
     let fits = state.fitter.run(jobs).await?;
     let fits = fits
         .into_iter()
-        .map(|r| {
-            r.inspect(|r| state.metrics.record_fit(r))
-                .map_err(|e| format!("{}: {}", e.code, e.message))
-        })
+        .map(|r| r.map_err(|e| format!("{}: {}", e.code, e.message)))
         .collect();
     let mut scene = assemble(segmentation, fits, segment_ms, start);
+    // (after the scene's own warnings joined the fits')
+    for fit in scene.objects.iter().filter_map(|o| o.fit.as_ref()) {
+        state.metrics.record_fit(fit);
+    }
     if let Some(options) = grasp_options {
         // the table found is the hand's floor unless the request gives another
         let options = crate::grasp::GraspOptions {
