@@ -1,7 +1,8 @@
 //! A whole scene fitted: the frame segmented into its table and objects
 //! ([`super::objects`]), then every object fitted in one batch (one lockstep solve for
 //! all, one dispatch per solver iteration on the GPU), each seen from the camera (kept
-//! above the table on request: the fit's `support`) and with the caller's model (`auto` unless asked otherwise: cans and boxes beside rings).
+//! above the table on request: the fit's `support`) and with the caller's model (`auto`
+//! unless asked otherwise: cans and boxes beside rings).
 
 use super::objects::{SceneError, SceneOptions, Segmentation, segment};
 use super::table::Pixels;
