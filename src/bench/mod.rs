@@ -69,6 +69,15 @@ impl Machine {
     }
 }
 
+/// The q-quantile of `values` (the element at rank q·n, sorted), NaN for none.
+pub fn percentile(mut values: Vec<f64>, q: f64) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    values.sort_by(f64::total_cmp);
+    values[((values.len() as f64 * q) as usize).min(values.len() - 1)]
+}
+
 /// A report that can be written in the three forms.
 pub trait Report: Serialize {
     /// The file stem (`paper`, `synthetic`, `scaling`).

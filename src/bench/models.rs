@@ -7,8 +7,8 @@
 //! parameter rule for a holed shape, the surface chamfer distance for a superellipsoid
 //! ([`crate::suite::chamfer`]).
 
-use super::Report;
 use super::synthetic::{Presentation, category, presented, wilson_interval};
+use super::{Report, percentile};
 use crate::eval::{Backend, make_evaluator};
 use crate::fit::{FitOptions, Model, fit};
 use crate::model::Pose;
@@ -109,14 +109,6 @@ pub fn run(
         model: base.model,
         cases: out,
     })
-}
-
-fn percentile(mut values: Vec<f64>, q: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    values.sort_by(f64::total_cmp);
-    values[((values.len() as f64 * q) as usize).min(values.len() - 1)]
 }
 
 impl Report for ModelReport {

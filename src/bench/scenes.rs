@@ -6,7 +6,7 @@
 //! phantoms (segments mostly of table or nothing), duplicates (a second segment of one
 //! object) and the time of the whole scene.
 
-use super::Report;
+use super::{Report, percentile};
 use crate::eval::{Backend, make_evaluator};
 use crate::fit::{FitOptions, Model};
 use crate::io::depth::{DepthOptions, PinholeIntrinsics, back_project_pixels};
@@ -248,16 +248,14 @@ impl Report for ScenesReport {
                 kept.iter().filter(|o| o.success).count()
             );
         }
-        let mut times: Vec<f64> = self.frames.iter().map(|f| f.total_ms).collect();
-        times.sort_by(f64::total_cmp);
-        let mut segment: Vec<f64> = self.frames.iter().map(|f| f.segment_ms).collect();
-        segment.sort_by(f64::total_cmp);
-        if !times.is_empty() {
+        if !self.frames.is_empty() {
+            let times = || self.frames.iter().map(|f| f.total_ms).collect::<Vec<_>>();
+            let segment: Vec<f64> = self.frames.iter().map(|f| f.segment_ms).collect();
             md += &format!(
                 "\n\nTime per frame (segmentation and every fit): median {:.0} ms, p95 {:.0} ms; segmentation alone median {:.0} ms.\n",
-                times[times.len() / 2],
-                times[(times.len() * 95 / 100).min(times.len() - 1)],
-                segment[segment.len() / 2]
+                percentile(times(), 0.5),
+                percentile(times(), 0.95),
+                percentile(segment, 0.5)
             );
         }
         md

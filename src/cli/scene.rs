@@ -164,8 +164,7 @@ pub fn scene(args: SceneArgs) -> Result<(), Failure> {
         }
     }
     if let Some(path) = &args.picture {
-        let png = picture(&report, &image, &options)
-            .map_err(|e| Failure::input(format!("picture: {e}")))?;
+        let png = picture(&report).map_err(|e| Failure::input(format!("picture: {e}")))?;
         write_file(path, |out| {
             out.extend_from_slice(&png);
             Ok(())
@@ -179,26 +178,14 @@ pub fn scene(args: SceneArgs) -> Result<(), Failure> {
     Ok(())
 }
 
-/// The scene drawn: the fitted objects' points (back-projected from their pixels) in
-/// their object's colour, and their surfaces.
-fn picture(
-    report: &crate::scene::fit::SceneReport,
-    image: &crate::synth::DepthImage,
-    options: &DepthOptions,
-) -> Result<Vec<u8>, String> {
-    let k = options.intrinsics;
+/// The scene drawn: the fitted objects' points in their object's colour, and their
+/// surfaces.
+fn picture(report: &crate::scene::fit::SceneReport) -> Result<Vec<u8>, String> {
     let (mut points, mut owners, mut fits) = (Vec::new(), Vec::new(), Vec::new());
     for object in &report.objects {
         let Some(fit) = &object.fit else { continue };
-        for &(u, v) in &object.pixels {
-            let z = image.data[(v * image.width + u) as usize] as f64 * image.scale;
-            points.push(glam::DVec3::new(
-                (u as f64 - k.cx) / k.fx * z,
-                (v as f64 - k.cy) / k.fy * z,
-                z,
-            ));
-            owners.push(fits.len());
-        }
+        points.extend_from_slice(&object.cloud);
+        owners.extend(std::iter::repeat_n(fits.len(), object.cloud.len()));
         fits.push(fit.fitted);
     }
     crate::render::render_png(

@@ -31,9 +31,11 @@ pub struct SceneObject {
     pub points: usize,
     /// [x, y, width, height] in pixels
     pub pixel_box: [u32; 4],
-    /// its pixels (column, row)
+    /// its pixels (column, row) and their points in the camera's frame, in one order
     #[serde(skip)]
     pub pixels: Vec<(u32, u32)>,
+    #[serde(skip)]
+    pub cloud: Vec<DVec3>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fit: Option<FitReport>,
     /// why it could not be fitted
@@ -154,6 +156,7 @@ pub fn assemble(
                 points: segment.points.len(),
                 pixel_box: segment.pixel_box(),
                 pixels: segment.pixels,
+                cloud: segment.points,
                 fit,
                 error,
                 grasps: None,
