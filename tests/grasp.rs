@@ -309,6 +309,46 @@ fn a_box_is_grasped_across_its_principal_axes() {
 }
 
 #[test]
+fn a_ring_with_a_pinched_section_is_grasped_across_its_faces_not_its_tips() {
+    // rings whose section is nearly a diamond (eps1 = 1.8): at the section's top, bottom
+    // and sides the normal turns within a pad's reach, so only the pinches across its
+    // opposite faces hold
+    let round = Shape::new(0.02, 0.02, 0.012, 2.0, 1.8, 1.0);
+    let oval = Shape { a2: 0.015, ..round };
+    for shape in [round, oval] {
+        let plan = grasp::plan::plan(&request(shape, pose())).unwrap();
+        let diagonal: Vec<_> = plan
+            .grasps
+            .iter()
+            .filter(|g| g.kind == GraspKind::SectionDiagonal)
+            .collect();
+        assert!(!diagonal.is_empty(), "{:?}", plan.rejected);
+        for g in &diagonal {
+            // opposite normals; on a ring round in top view also along the closing line
+            let closing = DVec3::from_array(g.closing);
+            let [n1, n2] = g.normals.map(DVec3::from_array);
+            assert!(n1.dot(-n2) > 1.0 - 1e-9, "{g:?}");
+            if shape == round {
+                assert!(n2.dot(closing) > 1.0 - 1e-6, "{g:?}");
+            }
+        }
+        let pinches: Vec<_> = plan
+            .grasps
+            .iter()
+            .filter(|g| matches!(g.kind, GraspKind::SectionHeight | GraspKind::SectionWidth))
+            .collect();
+        assert!(pinches.is_empty(), "{pinches:?}");
+    }
+    // a round section (eps1 = 1) has no faces and gets no such candidates
+    let plan = grasp::plan::plan(&request(Shape { eps1: 1.0, ..round }, pose())).unwrap();
+    assert!(
+        plan.grasps
+            .iter()
+            .all(|g| g.kind != GraspKind::SectionDiagonal)
+    );
+}
+
+#[test]
 fn bad_grippers_and_frictions_are_refused() {
     let mut r = request(SHAPES[0], Pose::IDENTITY);
     r.gripper.max_opening = -1.0;

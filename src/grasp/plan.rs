@@ -8,7 +8,10 @@
 //!   section's height (contacts at its top and bottom, the hand coming in from outside
 //!   the ring or along it), and a pinch across its width (one finger in the hole, the
 //!   hand along the axis); the section's thinner direction scores better by its flatter
-//!   contacts;
+//!   contacts. A pinched section (eps1 > 1, a diamond at eps1 = 2) has sharp tips at its
+//!   top, bottom and sides and flat faces between them: its pinches go across the two
+//!   pairs of opposite faces, at the points where the section's radius meets the face
+//!   square (below);
 //! * across the whole body through its centre, in every direction of the x-y plane (the
 //!   hand along the axis or across it);
 //! * without a hole, also across the axis (top and bottom, the hand from the side): the
@@ -64,6 +67,8 @@ pub enum GraspKind {
     SectionHeight,
     /// across the ring's section, one finger in the hole
     SectionWidth,
+    /// across a pinched section's opposite faces, slanting between top and side
+    SectionDiagonal,
     /// across the whole body through its centre, perpendicular to the axis
     AcrossBody,
     /// across the axis of a shape without a hole, top to bottom
@@ -189,6 +194,17 @@ fn candidates(shape: &Shape) -> Vec<Candidate> {
                     approach,
                 });
             }
+            if let Some(eta) = face_square_eta(shape, omega) {
+                for eta in [eta, PI - eta] {
+                    for approach in [-outward, along, -along] {
+                        out.push(Candidate {
+                            kind: GraspKind::SectionDiagonal,
+                            contacts: [(eta - PI, omega), (eta, omega)],
+                            approach,
+                        });
+                    }
+                }
+            }
         }
     }
     for k in 0..BODY_DIRECTIONS {
@@ -215,6 +231,24 @@ fn candidates(shape: &Shape) -> Vec<Candidate> {
         }
     }
     out
+}
+
+/// Below this eps1 the section has no faces to pinch between its tips.
+const PINCHED_SECTION: f64 = 1.1;
+
+/// The section angle in (0, pi/2) of a pinched section's face point whose radius from
+/// the section's centre is along its normal, or None for a section that is not pinched.
+/// The section at omega is the superellipse (r cos^e1 eta, a3 sin^e1 eta) with r the
+/// mean superellipse's direction scale (eq. 2); its normal is along
+/// (cos^(2-e1) eta / r, sin^(2-e1) eta / a3), parallel to the point where
+/// tan^(2 e1 - 2) eta = (r / a3)^2. The points at eta and eta + pi are then antipodal.
+fn face_square_eta(shape: &Shape, omega: f64) -> Option<f64> {
+    if shape.eps1 < PINCHED_SECTION {
+        return None;
+    }
+    let [x, y] = crate::model::mean_superellipse_point(shape, omega);
+    let r = x.hypot(y) / shape.a4;
+    Some((r / shape.a3).powf(1.0 / (shape.eps1 - 1.0)).atan())
 }
 
 enum Verdict {
