@@ -438,6 +438,48 @@ fn the_scene_route_answers_the_table_and_its_objects_and_refuses_what_is_no_scen
         );
     }
     assert!(scene["timing_ms"]["segment"].as_f64().unwrap() > 0.0);
+    // the scene's objects as a simulator scene, from the link in its answer: the tar
+    // unpacks into MJCF, URDF and meshes that MuJoCo loads with one body per object
+    let link = scene["export"].as_str().unwrap();
+    let r = c.get(server.url(link)).send().unwrap();
+    assert_eq!(r.status().as_u16(), 200);
+    assert_eq!(r.headers()["content-type"], "application/x-tar");
+    let dir = std::env::temp_dir().join(format!("supertoroid-scene-tar-{}", std::process::id()));
+    tar::Archive::new(std::io::Cursor::new(r.bytes().unwrap()))
+        .unpack(&dir)
+        .unwrap();
+    assert!(dir.join("scene.urdf").exists());
+    let loaded = std::process::Command::new("python3")
+        .args([
+            "-c",
+            "import mujoco, sys; m = mujoco.MjModel.from_xml_path(sys.argv[1]); print(m.nbody, m.njnt)",
+        ])
+        .arg(dir.join("scene.xml"))
+        .output()
+        .expect("python3");
+    let text = String::from_utf8_lossy(&loaded.stdout);
+    // the world and three free bodies
+    assert_eq!(
+        text.trim(),
+        "4 3",
+        "{text}{}",
+        String::from_utf8_lossy(&loaded.stderr)
+    );
+    std::fs::remove_dir_all(&dir).ok();
+    let code = |path: &str| {
+        let r = c.get(server.url(path)).send().unwrap();
+        let status = r.status().as_u16();
+        let e: Value = r.json().unwrap();
+        (status, e["error"]["code"].as_str().unwrap().to_owned())
+    };
+    assert_eq!(
+        code("/v1/scene/no-such-scene/export"),
+        (404, "scene_not_found".to_owned())
+    );
+    assert_eq!(
+        code(&format!("{link}?density=0")),
+        (422, "invalid_export_options".to_owned())
+    );
     // more objects than allowed, a bare table, no table at all: each its own 422
     let refused = |body: Value| {
         let r = c.post(server.url("/v1/scene")).json(&body).send().unwrap();

@@ -106,35 +106,34 @@ pub(crate) fn object_name(i: usize) -> String {
     format!("object_{i}")
 }
 
-/// Writes `scene.xml` (MJCF), `scene.urdf` and each object's meshes into `dir`; returns
-/// the files written.
-pub fn write(scene: &SceneExport, dir: &Path) -> Result<Vec<PathBuf>, String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let mut written = Vec::new();
-    let mut file = |name: &str, write: &dyn Fn(&mut dyn std::io::Write) -> std::io::Result<()>| {
-        let path = dir.join(name);
-        let mut out = std::io::BufWriter::new(
-            std::fs::File::create(&path).map_err(|e| format!("{}: {e}", path.display()))?,
-        );
-        write(&mut out)
-            .and_then(|_| std::io::Write::flush(&mut out))
-            .map_err(|e| format!("{}: {e}", path.display()))?;
-        written.push(path);
-        Ok::<_, String>(())
+/// One file of an export: its name (no directories) and its bytes.
+pub struct ExportFile {
+    pub name: String,
+    pub bytes: Vec<u8>,
+}
+
+/// `scene.xml` (MJCF), `scene.urdf` and each object's meshes, in memory; the documents
+/// name the meshes by these file names, beside them.
+pub fn files(scene: &SceneExport) -> Vec<ExportFile> {
+    let mut out = Vec::new();
+    let mut file = |name: String, write: &dyn Fn(&mut Vec<u8>) -> std::io::Result<()>| {
+        let mut bytes = Vec::new();
+        write(&mut bytes).expect("writing into memory does not fail");
+        out.push(ExportFile { name, bytes });
     };
     let mut entries = Vec::new();
     for (i, object) in scene.objects.iter().enumerate() {
         let name = object_name(i);
         let visual = meshes::visual(&object.shape);
-        file(&format!("{name}_visual.obj"), &|out| {
-            meshes::write_obj(&mut WriteRef(out), &visual)
-        })?;
+        file(format!("{name}_visual.obj"), &|out| {
+            meshes::write_obj(out, &visual)
+        });
         let pieces = if object.shape.has_hole() {
             let arcs = meshes::ring_pieces(&object.shape);
             for (k, piece) in arcs.iter().enumerate() {
-                file(&format!("{name}_piece_{k:02}.stl"), &|out| {
-                    meshes::write_stl_points(&mut WriteRef(out), piece, meshes::PIECE_GRID.0)
-                })?;
+                file(format!("{name}_piece_{k:02}.stl"), &|out| {
+                    meshes::write_stl_points(out, piece, meshes::PIECE_GRID.0)
+                });
             }
             arcs.len()
         } else {
@@ -144,9 +143,9 @@ pub fn write(scene: &SceneExport, dir: &Path) -> Result<Vec<PathBuf>, String> {
                 .iter()
                 .map(|t| t.map(|v| visual.vertices[v as usize]))
                 .collect();
-            file(&format!("{name}_piece_00.stl"), &|out| {
-                meshes::write_stl(&mut WriteRef(out), &triangles)
-            })?;
+            file(format!("{name}_piece_00.stl"), &|out| {
+                meshes::write_stl(out, &triangles)
+            });
             1
         };
         let (volume, com, inertia) = meshes::mass_properties(&visual);
@@ -158,20 +157,44 @@ pub fn write(scene: &SceneExport, dir: &Path) -> Result<Vec<PathBuf>, String> {
         });
     }
     let mjcf = mjcf::document(scene, &entries);
-    file("scene.xml", &|out| out.write_all(mjcf.as_bytes()))?;
+    file("scene.xml".into(), &|out| {
+        out.extend_from_slice(mjcf.as_bytes());
+        Ok(())
+    });
     let urdf = urdf::document(scene, &entries);
-    file("scene.urdf", &|out| out.write_all(urdf.as_bytes()))?;
-    Ok(written)
+    file("scene.urdf".into(), &|out| {
+        out.extend_from_slice(urdf.as_bytes());
+        Ok(())
+    });
+    out
 }
 
-/// `&mut dyn Write` as a sized writer for the mesh writers' generic parameter.
-struct WriteRef<'a>(&'a mut dyn std::io::Write);
+/// Writes [`files`] into `dir`; returns the paths written.
+pub fn write(scene: &SceneExport, dir: &Path) -> Result<Vec<PathBuf>, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    files(scene)
+        .into_iter()
+        .map(|f| {
+            let path = dir.join(&f.name);
+            std::fs::write(&path, &f.bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+            Ok(path)
+        })
+        .collect()
+}
 
-impl std::io::Write for WriteRef<'_> {
-    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-        self.0.write(buf)
+/// [`files`] as one ustar archive (`tar -x` unpacks a directory MuJoCo and URDF tools
+/// load as it is).
+pub fn tar_archive(scene: &SceneExport) -> Vec<u8> {
+    let mut archive = tar::Builder::new(Vec::new());
+    for f in files(scene) {
+        let mut header = tar::Header::new_ustar();
+        header.set_size(f.bytes.len() as u64);
+        header.set_mode(0o644);
+        archive
+            .append_data(&mut header, &f.name, f.bytes.as_slice())
+            .expect("appending to an archive in memory does not fail");
     }
-    fn flush(&mut self) -> std::io::Result<()> {
-        self.0.flush()
-    }
+    archive
+        .into_inner()
+        .expect("finishing an archive in memory does not fail")
 }

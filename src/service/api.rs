@@ -305,6 +305,7 @@ pub struct Health {
         super::geometry::surface,
         super::geometry::grasps,
         super::scene::scene,
+        super::exports::export,
         healthz,
         readyz,
         metrics,
@@ -346,6 +347,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/surface", post(super::geometry::surface))
         .route("/v1/grasps", post(super::geometry::grasps))
         .route("/v1/scene", post(super::scene::scene))
+        .route("/v1/scene/{id}/export", get(super::exports::export))
         .fallback(not_found)
         .layer(axum::extract::DefaultBodyLimit::max(
             state.config.body_limit,

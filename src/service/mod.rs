@@ -6,12 +6,14 @@
 //!   and the CPU fallback.
 //! * [`api`]: routes, request and response types, content negotiation.
 //! * [`geometry`]: routes on a fitted object: surface queries and grasps.
+//! * [`scene`]: a table-top frame's objects; [`exports`]: a recent scene's simulator files.
 //! * [`error`]: the `{"error": {"code", "message"}}` body every failure carries.
 //! * [`metrics`]: the Prometheus registry.
 
 pub mod api;
 pub mod config;
 pub mod error;
+pub mod exports;
 pub mod fitter;
 pub mod geometry;
 pub mod metrics;
@@ -30,6 +32,8 @@ pub struct AppState {
     pub config: ServiceConfig,
     pub fitter: fitter::Fitter,
     pub metrics: metrics::Metrics,
+    /// the last scenes' objects, for their exports
+    pub scenes: exports::SceneStore,
 }
 
 /// Builds the state (starts the GPU context when the backend asks for one) and the router.
@@ -38,6 +42,7 @@ pub fn app(config: ServiceConfig) -> (Router, Arc<AppState>) {
     let state = Arc::new(AppState {
         fitter,
         metrics: metrics::Metrics::new(),
+        scenes: exports::SceneStore::default(),
         config,
     });
     (api::router(state.clone()), state)

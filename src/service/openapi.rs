@@ -105,6 +105,9 @@ fn build() -> Value {
             }
         }
     }
+    // the scene export's archive is bytes, not an array of numbers
+    doc["paths"]["/v1/scene/{id}/export"]["get"]["responses"]["200"]["content"]["application/x-tar"]
+        ["schema"] = json!({"type": "string", "format": "binary"});
     bound_integers(&mut doc);
     doc
 }

@@ -62,6 +62,10 @@ impl DepthImages for SceneRequest {
 #[derive(Serialize, ToSchema)]
 pub struct SceneResponse {
     pub request_id: String,
+    /// where to GET the fitted objects and the table as a simulator scene (a tar of
+    /// MJCF, URDF and meshes); absent when no object was fitted
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub export: Option<String>,
     #[serde(flatten)]
     pub scene: SceneReport,
 }
@@ -86,6 +90,7 @@ impl From<SceneError> for ApiError {
 /// model `auto` (supertoroid or superellipsoid by BIC) unless `options.model` says
 /// otherwise. Poses come back in the camera's optical frame (x right, y down, z forward).
 /// With `options.grasps` each fitted object also gets its grasps, kept above the table.
+/// `export` links the scene's simulator files (`GET /v1/scene/{id}/export`).
 #[utoipa::path(
     post, path = "/v1/scene",
     request_body(content(
@@ -169,8 +174,24 @@ pub async fn scene(
             tracing::warn!(request_id = %id.0, object = object.id, "{warning}");
         }
     }
+    let objects: Vec<_> = scene
+        .objects
+        .iter()
+        .filter_map(|o| o.fit.as_ref().map(|f| f.fitted))
+        .collect();
+    let export = (!objects.is_empty()).then(|| {
+        state.scenes.keep(
+            &id.0,
+            super::exports::KeptScene {
+                objects,
+                plane: scene.plane,
+            },
+        );
+        super::exports::export_path(&id.0)
+    });
     Ok(Json(SceneResponse {
         request_id: id.0,
+        export,
         scene,
     }))
 }
