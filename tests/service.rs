@@ -900,11 +900,11 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
     ] {
         assert!(metrics.contains(name), "{name} missing from:\n{metrics}");
     }
-    // a fit with a warning is counted by the warning's kind: a thin ring (a3 = 1 cm)
-    // under 6 mm of noise
+    // a fit with a warning is counted by the warning's kind: a thin ring (a3 = 1 cm),
+    // 300 points under 6 mm of noise
     let shape = Shape::new(0.05, 0.05, 0.01, 2.0, 1.0, 1.0);
     let mut rng = synth::rng(5);
-    let mut points = synth::sample_surface(&shape, &Pose::default(), 2000, &mut rng);
+    let mut points = synth::sample_surface(&shape, &Pose::default(), 300, &mut rng);
     synth::add_noise(&mut points, 0.006, &mut rng);
     let points: Vec<[f64; 3]> = points.iter().map(|p| p.to_array()).collect();
     let fit: Value = c
@@ -915,7 +915,10 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
         .json()
         .unwrap();
     assert!(
-        fit["warnings"][0].as_str().unwrap().starts_with("noisy"),
+        fit["warnings"][0]
+            .as_str()
+            .unwrap()
+            .starts_with("uncertain shape"),
         "{fit}"
     );
     let metrics = metrics_text(&c, &server);
@@ -931,7 +934,7 @@ fn health_readiness_metrics_index_and_a_valid_openapi_document() {
         (held["shape"]["a3"].as_f64().unwrap() - 0.01).abs() < 1e-12,
         "{held}"
     );
-    let counted = "supertoroid_fit_warnings_total{kind=\"noisy_for_this_shape\"} 1";
+    let counted = "supertoroid_fit_warnings_total{kind=\"uncertain_shape\"} 1";
     assert!(
         metrics.contains(counted),
         "{counted} missing from:\n{metrics}"

@@ -44,11 +44,10 @@ pub struct Case {
     pub t_total_ms: f64,
     /// the true noise sigma over the true shape's smallest half-axis
     pub noise_ratio: f64,
-    /// whether the fit carried the noise warning (`fit::NOISE_WARNING_RATIO`)
-    pub noise_warning: bool,
-    /// whether it carried the unseen-surface warning (`fit::coverage`, single views
-    /// with the viewpoint only)
-    pub coverage_warning: bool,
+    /// the object screen refused the cloud (`no_object_found`): a failed case
+    pub refused: bool,
+    /// whether the fit carried the `uncertain shape` warning (`fit::uncertainty`)
+    pub uncertain_warning: bool,
     /// whether it carried the warning of a fit off a precise cloud (`fit::PRECISE_MISFIT_WARNING`)
     pub misfit_warning: bool,
     /// whether it carried any warning at all
@@ -67,6 +66,34 @@ pub struct Case {
     /// last polish's grid; a noise-free case counts as within: its truth is an exact
     /// optimum); None without
     pub from_truth: Option<bool>,
+}
+
+impl Case {
+    /// A case whose cloud the object screen refused: failed, with no errors to measure.
+    fn refused(seed: u64, partial: bool, noise: f64, outliers: f64) -> Self {
+        Self {
+            seed,
+            partial,
+            noise,
+            outliers,
+            success: false,
+            centre: f64::NAN,
+            axis_degrees: f64::NAN,
+            sizes: f64::NAN,
+            a4: f64::NAN,
+            eps: f64::NAN,
+            t_total_ms: f64::NAN,
+            noise_ratio: f64::NAN,
+            refused: true,
+            uncertain_warning: false,
+            misfit_warning: false,
+            warned: false,
+            attainable: f64::NAN,
+            visible_coverage: f64::NAN,
+            viewpoint_found: false,
+            from_truth: None,
+        }
+    }
 }
 
 /// How the suite's clouds reach the fit.
@@ -304,8 +331,16 @@ pub fn run(
             viewpoint,
             ..base.clone()
         };
-        let mut report = fit(evaluator.as_mut(), &points, &options)
-            .map_err(|e| format!("case {case_seed}: {e}"))?;
+        let mut report = match fit(evaluator.as_mut(), &points, &options) {
+            Ok(report) => report,
+            // a true object refused by the object screen is a failed case, not a stop
+            Err(crate::fit::FitError::NoObject(_)) => {
+                out.push(Case::refused(case_seed, partial, noise, outliers));
+                bar.inc(1);
+                continue;
+            }
+            Err(e) => return Err(format!("case {case_seed}: {e}")),
+        };
         let fitted = &report.fitted.1;
         report.fitted.1 = Pose::new(
             back.rotation * fitted.rotation,
@@ -338,8 +373,8 @@ pub fn run(
             eps: e.eps,
             t_total_ms: report.timing_ms.total,
             noise_ratio: noise * case.shape.size() / case.shape.thinnest_half_axis(),
-            noise_warning: report.warnings.iter().any(|w| w.starts_with("noisy")),
-            coverage_warning: report.warnings.iter().any(|w| w.starts_with("unseen")),
+            refused: false,
+            uncertain_warning: report.warnings.iter().any(|w| w.starts_with("uncertain")),
             misfit_warning: report
                 .warnings
                 .iter()
@@ -461,12 +496,10 @@ fn bands(cases: &[Case]) -> (Vec<Band>, Vec<Band>) {
             }));
             low = high;
         }
-        by_warning.push(band(partial, "no warning".into(), &|c| {
-            !c.noise_warning && !c.coverage_warning && !c.misfit_warning
-        }));
-        by_warning.push(band(partial, "noisy".into(), &|c| c.noise_warning));
-        by_warning.push(band(partial, "unseen surface".into(), &|c| {
-            c.coverage_warning
+        by_warning.push(band(partial, "no warning".into(), &|c| !c.warned));
+        by_warning.push(band(partial, "any warning".into(), &|c| c.warned));
+        by_warning.push(band(partial, "uncertain shape".into(), &|c| {
+            c.uncertain_warning
         }));
         by_warning.push(band(partial, "off a precise cloud".into(), &|c| {
             c.misfit_warning
@@ -482,7 +515,7 @@ impl Report for SyntheticReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,noise_warning,coverage_warning,attainable,misfit_warning,visible_coverage,from_truth\n",
+            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,refused,uncertain_warning,attainable,misfit_warning,visible_coverage,from_truth\n",
         );
         for c in &self.cases {
             s += &format!(
@@ -499,8 +532,8 @@ impl Report for SyntheticReport {
                 c.eps,
                 c.t_total_ms,
                 c.noise_ratio,
-                c.noise_warning,
-                c.coverage_warning,
+                c.refused,
+                c.uncertain_warning,
                 c.attainable,
                 c.misfit_warning,
                 c.visible_coverage,
@@ -628,7 +661,7 @@ impl Report for SyntheticReport {
                 100.0 * c.attainable_rate
             );
         }
-        md += "\nBy the noise against the shape: the true noise sigma over the true shape's smallest half-axis (min of a1, a2, a3), and by the fit's warnings: `noisy` (its own estimate of the same ratio at or above `fit::NOISE_WARNING_RATIO`) and `unseen surface` (with the viewpoint, less than `fit::coverage::MIN_VISIBLE_COVERAGE` of the fitted surface facing it has points on it) and `off a precise cloud` (a median distance between rounding and `fit::PRECISE_MISFIT_WARNING` of the size); a fit can carry several:\n\n| cloud | band | cases | success |\n|---|---|---:|---:|\n";
+        md += "\nBy the noise against the shape: the true noise sigma over the true shape's smallest half-axis (min of a1, a2, a3), and by the fit's warnings: any, `uncertain shape` (standard errors of the shape at half the success rule's tolerances or more, `fit::uncertainty`) and `off a precise cloud` (a median distance between rounding and `fit::PRECISE_MISFIT_WARNING` of the size); a fit can carry several:\n\n| cloud | band | cases | success |\n|---|---|---:|---:|\n";
         for b in self.by_noise_ratio.iter().chain(&self.by_warning) {
             md += &format!(
                 "| {} | {} | {} | {}/{} ({:.0}%) |\n",

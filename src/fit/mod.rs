@@ -47,6 +47,7 @@ mod rescue;
 pub mod scatter;
 mod search;
 pub mod starts;
+pub mod uncertainty;
 pub mod viewpoint;
 
 use ablation::Stage;
@@ -58,11 +59,11 @@ pub use options::{
     FitOptions, Method, PAPER_A4_REWARD, SHAPE_NAMES, known_with_a3, parse_known_shape,
 };
 use prepare::{Prepared, StartSet, half_extents_about, prepare};
+use report::misfit_warning;
 pub use report::{
-    BackendOut, FitReport, Iterations, NOISE_MODEL_WARNING_RATIO, NOISE_WARNING_RATIO,
-    PRECISE_MISFIT_WARNING, PointsOut, PoseOut, Quality, Timing, parse_report_json, quality,
+    BackendOut, FitReport, Iterations, PRECISE_MISFIT_WARNING, PointsOut, PoseOut, Quality, Timing,
+    parse_report_json, quality,
 };
-use report::{coverage_warning, misfit_warning, noise_warning};
 pub use rescue::RESCUE_A4;
 use rescue::{RESCUE_FIRST_ITERATIONS, RESCUE_KEPT, behind_the_skin, rescue_unseen_surface};
 pub use viewpoint::{Viewpoint, ViewpointSource, ViewpointUsed};
@@ -252,26 +253,26 @@ pub fn fit_batch(
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
     // each cloud with an object in it: its model's fit, or both models' for auto
-    let plans: Vec<Result<(Option<String>, Vec<FitOptions>), FitError>> = clouds
+    let plans: Vec<Result<Vec<FitOptions>, FitError>> = clouds
         .iter()
         .map(|(points, o)| {
-            let note = screen_for_an_object(points, o.seed)?;
-            Ok((note, fits_of_model(o)?))
+            screen_for_an_object(points, o.seed)?;
+            fits_of_model(o)
         })
         .collect();
     let jobs: Vec<(&[DVec3], &FitOptions)> = clouds
         .iter()
         .zip(&plans)
         .filter_map(|((points, _), plan)| Some((*points, plan.as_ref().ok()?)))
-        .flat_map(|(points, (_, fits))| fits.iter().map(move |o| (points, o)))
+        .flat_map(|(points, fits)| fits.iter().map(move |o| (points, o)))
         .collect();
     let mut fits = fit_batch_unscreened(evaluator, &jobs)?.into_iter();
     Ok(clouds
         .iter()
         .zip(plans)
         .map(|((points, _), plan)| {
-            let (note, options) = plan?;
-            let mut fit = if options.len() == 2 {
+            let options = plan?;
+            if options.len() == 2 {
                 let holed = fits.next().expect("one fit per model");
                 let genus0 = fits.next().expect("one fit per model");
                 match (holed, genus0) {
@@ -286,11 +287,7 @@ pub fn fit_batch(
                         r.model = ModelOut::requested(&r.shape);
                         r
                     })
-            };
-            if let (Ok(r), Some(note)) = (fit.as_mut(), note) {
-                r.warnings.push(note);
             }
-            fit
         })
         .collect())
 }
@@ -330,18 +327,15 @@ fn fits_of_model(o: &FitOptions) -> Result<Vec<FitOptions>, FitError> {
     })
 }
 
-/// [`FitError::NoObject`] for a bare plane; a note for a flat ring seen face-on.
-fn screen_for_an_object(points: &[DVec3], seed: u64) -> Result<Option<String>, FitError> {
+/// [`FitError::NoObject`] for a bare plane. A flat ring seen face-on is fitted: where
+/// its thickness is lost in the noise, its standard errors say so
+/// ([`uncertainty`]).
+fn screen_for_an_object(points: &[DVec3], seed: u64) -> Result<(), FitError> {
     use planarity::Planarity;
     // the checks of `check_cloud` come first, with their own errors
     check_cloud(points)?;
     match planarity::planarity(points, seed) {
-        Planarity::Solid => Ok(None),
-        Planarity::FlatRing { share } => Ok(Some(format!(
-            "flat ring seen face-on: {:.0}% of the points lie on one plane within their \
-             noise, around a hole; the cloud does not show the ring's thickness (a3)",
-            100.0 * share
-        ))),
+        Planarity::Solid | Planarity::FlatRing { .. } => Ok(()),
         Planarity::BarePlane { share, tolerance } => Err(FitError::NoObject(format!(
             "{:.0}% of the points lie on one plane (within {tolerance:.1e} in the cloud's units, three times their \
              own scatter) and enclose no hole: a bare surface such as a table, or one face \
@@ -1020,16 +1014,14 @@ fn report(
     quality.visible_coverage = p
         .viewpoint
         .map(|v| coverage::visible_coverage(candidate, &p.stage2_pts, v));
-    // (the model recovers full clouds at far higher noise than single views)
-    let warnings = noise_warning(
-        &shape,
-        &quality,
-        modelled_sigma.is_some() && p.viewpoint.is_none(),
-    )
-    .into_iter()
-    .chain(coverage_warning(&quality))
-    .chain(misfit_warning(&shape, &quality))
-    .collect();
+    quality.standard_errors = uncertainty::standard_errors(&shape, &pose, p.points);
+    let warnings = quality
+        .standard_errors
+        .as_ref()
+        .and_then(uncertainty::warning)
+        .into_iter()
+        .chain(misfit_warning(&shape, &quality))
+        .collect();
     let r = pose.matrix();
     let q = pose.rotation;
     FitReport {

@@ -2,7 +2,7 @@
 //! answer, documented in the README), the quality of the fit against all input points,
 //! and the warnings a fit carries when its numbers should not be taken at face value.
 
-use super::{Method, coverage};
+use super::Method;
 use crate::model::{Pose, Shape, meridian_distance, meridian_residual_with_gradient};
 use glam::DVec3;
 use serde::Serialize;
@@ -31,6 +31,10 @@ pub struct Quality {
     /// that has points at its depth (see [`coverage`]); absent without one
     #[serde(skip_serializing_if = "Option::is_none")]
     pub visible_coverage: Option<f64>,
+    /// how tightly the points pin the shape down ([`super::uncertainty`]); absent where
+    /// the points are too few
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub standard_errors: Option<super::uncertainty::StandardErrors>,
 }
 
 /// Where a fit's time went (milliseconds): the first fit's stages 1 and 2 (the noise
@@ -122,67 +126,6 @@ pub struct FitReport {
     pub rescued: bool,
 }
 
-/// Noise ([`Quality::noise_sigma`]) above this fraction of the fitted shape's smallest
-/// half-axis (min of a1, a2, a3) leaves its sizes and eps unreliable, and the report says
-/// so. Measured on the ground-truth suite (540 cases, seeds 10000, 20000, 30000): full
-/// clouds below the ratio 183 of 184 fits within tolerance, at or above it 45 of 86;
-/// single views 118 of 226 and 10 of 44 (0.2: full 207 of 219 below; 0.1: 135 of 136
-/// but 134 warned). No estimator tried (meridian, exact Euclidean and curvature-corrected
-/// Euclidean distance; squared, Huber and Cauchy loss) meets the tolerances on most of
-/// the warned cases even started at the true parameters: there the noise is the limit,
-/// not the search.
-pub const NOISE_WARNING_RATIO: f64 = 0.15;
-
-/// The same for a fit without a viewpoint that the noise model ([`super::likelihood`])
-/// polished, whose sigma is the model's own (single views keep the ratio above: there
-/// the model's fits at 0.1-0.2 of the thinnest half-axis were within tolerance in 36 of
-/// 69 cases, above 0.2 in 11 of 58). Measured on the suite's full clouds (270 cases,
-/// seeds 10000, 20000, 30000): 265 within tolerance, 262 of the 266 unwarned; 4 of the 5
-/// misses had noise at 0.1-0.7 of the thinnest half-axis.
-pub const NOISE_MODEL_WARNING_RATIO: f64 = 0.5;
-
-/// The warning of [`NOISE_WARNING_RATIO`] ([`NOISE_MODEL_WARNING_RATIO`] for a full
-/// cloud's `noise_modelled` fit), if it applies.
-pub(super) fn noise_warning(
-    shape: &Shape,
-    quality: &Quality,
-    noise_modelled: bool,
-) -> Option<String> {
-    let thinnest = shape.thinnest_half_axis();
-    let ratio = quality.noise_sigma / thinnest;
-    let limit = if noise_modelled {
-        NOISE_MODEL_WARNING_RATIO
-    } else {
-        NOISE_WARNING_RATIO
-    };
-    (ratio >= limit).then(|| {
-        format!(
-            "noisy for this shape: the noise (sigma about {:.3e}) is {:.0}% of the smallest \
-             half-axis ({:.3e}); at {:.0}% or more, sizes and eps are often off by more than \
-             10% and 0.15 (on full clouds, centre and hole axis still hold)",
-            quality.noise_sigma,
-            100.0 * ratio,
-            thinnest,
-            100.0 * limit
-        )
-    })
-}
-
-/// The warning of [`coverage::MIN_VISIBLE_COVERAGE`], if it applies.
-pub(super) fn coverage_warning(quality: &Quality) -> Option<String> {
-    let covered = quality.visible_coverage?;
-    (covered < coverage::MIN_VISIBLE_COVERAGE).then(|| {
-        format!(
-            "unseen surface: only {:.0}% of the fitted surface that faces the viewpoint has \
-             points on it (under {:.0}%): the sensor would have seen the rest, so the fit is \
-             likely a wrong shape, e.g. a body grown into the side the sensor did not see \
-             (or the viewpoint is not where the sensor was)",
-            100.0 * covered,
-            100.0 * coverage::MIN_VISIBLE_COVERAGE
-        )
-    })
-}
-
 /// The warning of a fit that stays off a precise cloud: its median distance above
 /// rounding but under [`PRECISE_MISFIT_WARNING`] of the size, where a noise-free cloud
 /// (a CAD model's, a simulator's) fitted in the right basin leaves rounding (below 1e-6
@@ -228,6 +171,7 @@ pub fn quality(shape: &Shape, pose: &Pose, points: &[DVec3]) -> Quality {
         inlier_fraction: inliers,
         noise_sigma: noise_sigma(shape, pose, points, NOISE_SAMPLE),
         visible_coverage: None,
+        standard_errors: None,
     }
 }
 

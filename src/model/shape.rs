@@ -86,7 +86,7 @@ impl Shape {
     }
 
     /// The smallest of a1, a2, a3: what sensor noise has to be small against for the
-    /// shape to be measurable (see `fit::NOISE_WARNING_RATIO`).
+    /// shape to be measurable.
     pub fn thinnest_half_axis(&self) -> f64 {
         self.a1.min(self.a2).min(self.a3)
     }
