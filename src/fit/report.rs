@@ -232,6 +232,7 @@ mod tests {
             inlier_fraction: 1.0,
             noise_sigma: 0.0,
             visible_coverage: None,
+            standard_errors: None,
         };
         // rounding, a wrong basin of a noise-free cloud, a sensor's noise
         assert!(misfit_warning(&shape, &at(1e-8)).is_none());

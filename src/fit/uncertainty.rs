@@ -142,3 +142,50 @@ pub fn warning(errors: &StandardErrors) -> Option<String> {
         )
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A ring's points about its true surface: noise-free they pin it exactly; under
+    /// noise the standard errors fall as one over the root of the count and grow with
+    /// the noise, and the warning follows its share of the tolerances.
+    #[test]
+    fn standard_errors_follow_the_noise_and_the_count() {
+        let shape = Shape::new(0.05, 0.04, 0.015, 2.0, 1.0, 1.0);
+        let pose = Pose::default();
+        let cloud = |count: usize, sigma: f64| {
+            let mut rng = crate::synth::rng(3);
+            let mut points = crate::synth::sample_surface(&shape, &pose, count, &mut rng);
+            crate::synth::add_noise(&mut points, sigma, &mut rng);
+            points
+        };
+        let exact = standard_errors(&shape, &pose, &cloud(1000, 0.0)).unwrap();
+        assert!(exact.share_of_tolerance() < 1e-9, "{exact:?}");
+        let few = standard_errors(&shape, &pose, &cloud(200, 0.002)).unwrap();
+        let many = standard_errors(&shape, &pose, &cloud(1800, 0.002)).unwrap();
+        let noisier = standard_errors(&shape, &pose, &cloud(1800, 0.004)).unwrap();
+        // sqrt(9) = 3 fewer-points ratio, 2 for twice the noise, within sampling spread
+        let ratio = few.sizes / many.sizes;
+        assert!((2.0..4.5).contains(&ratio), "{few:?} {many:?}");
+        let ratio = noisier.sizes / many.sizes;
+        assert!((1.5..2.7).contains(&ratio), "{noisier:?} {many:?}");
+        // more than the sample's cap: the covariance is scaled to the whole count
+        let capped = standard_errors(&shape, &pose, &cloud(7200, 0.002)).unwrap();
+        let ratio = many.sizes / capped.sizes;
+        assert!((1.5..2.7).contains(&ratio), "{many:?} {capped:?}");
+        let loose = StandardErrors {
+            sizes: 0.06,
+            a4: 0.0,
+            eps: 0.0,
+        };
+        assert!(warning(&loose).unwrap().starts_with("uncertain shape"));
+        assert!(
+            warning(&StandardErrors {
+                sizes: 0.04,
+                ..loose
+            })
+            .is_none()
+        );
+    }
+}
