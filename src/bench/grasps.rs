@@ -74,8 +74,28 @@ pub fn run(cases: usize, seed: u64, backend: Backend) -> Result<GraspReport, Str
             viewpoint: case.viewpoint.into(),
             ..options.clone()
         };
-        let report = fit(evaluator.as_mut(), &case.points, &fit_options)
-            .map_err(|e| format!("case {case_seed}: {e}"))?;
+        let report = match fit(evaluator.as_mut(), &case.points, &fit_options) {
+            Ok(report) => report,
+            // a true object refused by the object screen: no fit, no grasp
+            Err(crate::fit::FitError::NoObject(_)) => {
+                out.push(GraspCase {
+                    seed: case_seed,
+                    partial,
+                    noise,
+                    outliers,
+                    fit_success: false,
+                    grasped: false,
+                    valid_on_truth: false,
+                    contact_distance: f64::NAN,
+                    antipodal_on_truth: false,
+                    plan_ms: f64::NAN,
+                    rejected: Default::default(),
+                });
+                bar.inc(1);
+                continue;
+            }
+            Err(e) => return Err(format!("case {case_seed}: {e}")),
+        };
         let (shape, pose) = report.fitted;
         let errors = compare((&case.shape, &case.pose), (&shape, &pose));
         let started = std::time::Instant::now();
@@ -196,7 +216,12 @@ impl Report for GraspReport {
                 100.0 * hi
             );
         }
-        let mut times: Vec<f64> = self.cases.iter().map(|c| c.plan_ms).collect();
+        let mut times: Vec<f64> = self
+            .cases
+            .iter()
+            .map(|c| c.plan_ms)
+            .filter(|t| t.is_finite())
+            .collect();
         times.sort_by(f64::total_cmp);
         if !times.is_empty() {
             md += &format!(
