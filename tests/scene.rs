@@ -446,13 +446,37 @@ fn the_scene_route_answers_the_table_and_its_objects_and_refuses_what_is_no_scen
     // the scene's objects as a simulator scene, from the link in its answer: the tar
     // unpacks into MJCF, URDF and meshes that MuJoCo loads with one body per object
     let link = scene["export"].as_str().unwrap();
-    let r = c.get(server.url(link)).send().unwrap();
-    assert_eq!(r.status().as_u16(), 200);
-    assert_eq!(r.headers()["content-type"], "application/x-tar");
-    let dir = std::env::temp_dir().join(format!("supertoroid-scene-tar-{}", std::process::id()));
-    tar::Archive::new(std::io::Cursor::new(r.bytes().unwrap()))
-        .unpack(&dir)
-        .unwrap();
+    let unpacked = |query: &str, name: &str| {
+        let r = c.get(server.url(&format!("{link}{query}"))).send().unwrap();
+        assert_eq!(r.status().as_u16(), 200);
+        assert_eq!(r.headers()["content-type"], "application/x-tar");
+        let dir = std::env::temp_dir().join(format!("supertoroid-{name}-{}", std::process::id()));
+        tar::Archive::new(std::io::Cursor::new(r.bytes().unwrap()))
+            .unpack(&dir)
+            .unwrap();
+        dir
+    };
+    let dir = unpacked("", "scene-tar");
+    // in a world frame 1 m above the camera's, the first object is 1 m higher
+    let lifted = unpacked(
+        "?world_translation=0,0,1&world_quaternion=1,0,0,0",
+        "scene-tar-world",
+    );
+    let first_body_z = |dir: &std::path::Path| {
+        let xml = std::fs::read_to_string(dir.join("scene.xml")).unwrap();
+        let key = "<body name=\"object_0\" pos=\"";
+        let at = xml.find(key).unwrap() + key.len();
+        let pos: Vec<f64> = xml[at..]
+            .split('"')
+            .next()
+            .unwrap()
+            .split(' ')
+            .map(|v| v.parse().unwrap())
+            .collect();
+        pos[2]
+    };
+    assert!((first_body_z(&lifted) - first_body_z(&dir) - 1.0).abs() < 1e-6);
+    std::fs::remove_dir_all(&lifted).ok();
     assert!(dir.join("scene.urdf").exists());
     let loaded = std::process::Command::new("python3")
         .args([
@@ -483,6 +507,10 @@ fn the_scene_route_answers_the_table_and_its_objects_and_refuses_what_is_no_scen
     );
     assert_eq!(
         code(&format!("{link}?density=0")),
+        (422, "invalid_export_options".to_owned())
+    );
+    assert_eq!(
+        code(&format!("{link}?world_quaternion=0,0,0,0")),
         (422, "invalid_export_options".to_owned())
     );
     // more objects than allowed, a bare table, no table at all: each its own 422

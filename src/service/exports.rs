@@ -81,12 +81,17 @@ pub struct ExportQuery {
     /// the objects' density in kg/m³ for their masses and inertias (default 500)
     #[param(minimum = 1.0, maximum = 100000.0)]
     pub density: Option<f64>,
+    /// the world frame: the camera's position in it, `x,y,z` (default the camera's frame)
+    pub world_translation: Option<String>,
+    /// ... and its orientation, `w,x,y,z` (world = R·camera + t)
+    pub world_quaternion: Option<String>,
 }
 
 /// A recent scene as a simulator scene: a tar archive of `scene.xml` (MJCF: free bodies
 /// on the table plane under gravity along its normal), `scene.urdf` (objects fixed to
 /// `world`, the table a box) and each object's visual OBJ and collision STL pieces, in
-/// the camera's frame. Objects whose fit failed are left out. The service keeps the last
+/// the camera's frame or the world frame the query gives. Objects whose fit failed are
+/// left out. The service keeps the last
 /// 64 scenes; an older or unknown id is 404 `scene_not_found`.
 #[utoipa::path(
     get, path = "/v1/scene/{id}/export",
@@ -112,6 +117,13 @@ pub async fn export(
             format!("density must be in 1..=100000 kg/m³, not {density}"),
         ));
     }
+    let world = match (&query.world_translation, &query.world_quaternion) {
+        (None, None) => None,
+        (t, q) => Some(
+            Pose::parse(t.as_deref(), q.as_deref())
+                .map_err(|e| ApiError::unprocessable("invalid_export_options", e))?,
+        ),
+    };
     let Some(scene) = state.scenes.get(&id) else {
         return Err(ApiError::new(
             StatusCode::NOT_FOUND,
@@ -121,7 +133,7 @@ pub async fn export(
             ),
         ));
     };
-    let export = SceneExport::new(scene.objects, Some(scene.plane), None, density)
+    let export = SceneExport::new(scene.objects, Some(scene.plane), world, density)
         .map_err(|e| ApiError::unprocessable("nothing_to_export", e))?;
     let archive = tokio::task::spawn_blocking(move || tar_archive(&export))
         .await

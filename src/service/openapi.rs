@@ -105,9 +105,20 @@ fn build() -> Value {
             }
         }
     }
-    // the scene export's archive is bytes, not an array of numbers
-    doc["paths"]["/v1/scene/{id}/export"]["get"]["responses"]["200"]["content"]["application/x-tar"]
-        ["schema"] = json!({"type": "string", "format": "binary"});
+    // the scene export's archive is bytes, not an array of numbers; its world frame is
+    // text
+    let export = &mut doc["paths"]["/v1/scene/{id}/export"]["get"];
+    export["responses"]["200"]["content"]["application/x-tar"]["schema"] =
+        json!({"type": "string", "format": "binary"});
+    if let Some(parameters) = export["parameters"].as_array_mut() {
+        for p in parameters.iter_mut() {
+            match p["name"].as_str() {
+                Some("world_translation") => p["schema"]["pattern"] = json!(numbers_pattern(3)),
+                Some("world_quaternion") => p["schema"]["pattern"] = json!(numbers_pattern(4)),
+                _ => {}
+            }
+        }
+    }
     bound_integers(&mut doc);
     doc
 }
@@ -144,8 +155,16 @@ fn depth_frame_request(doc: &mut Value, request: &str, path: &str) {
 }
 
 /// `known=a1:0.05,a4:2.1` (or `=`) in a query string.
+/// A number as the text options write it.
+const NUMBER: &str = r"[-+]?([0-9]{1,15}\.?[0-9]{0,15}|\.[0-9]{1,15})([eE][-+]?[0-9]{1,2})?";
+
+/// `count` comma-separated numbers.
+fn numbers_pattern(count: usize) -> String {
+    format!("^ *{NUMBER}( *, *{NUMBER}){{{}}} *$", count - 1)
+}
+
 fn known_text_pattern() -> String {
-    let number = r"[-+]?([0-9]{1,15}\.?[0-9]{0,15}|\.[0-9]{1,15})([eE][-+]?[0-9]{1,2})?";
+    let number = NUMBER;
     let pair = format!("({}) *[:=] *{number}", SHAPE_NAMES.join("|"));
     format!("^ *{pair}( *, *{pair})* *$")
 }
