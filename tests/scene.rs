@@ -357,6 +357,35 @@ fn a_flat_washer_seen_face_on_is_fitted_and_warned_uncertain() {
 /// its model, and the fits within their rule but for at most one. (This frame's sixth
 /// object, partly hidden behind another, comes in two pieces: the second is a made-up
 /// object, counted as a duplicate.)
+/// The free space a scene hands each object's fit: points on the camera's rays to the
+/// table seen past the object. For a ring lying on the table there are hundreds, none
+/// inside the ring itself, none under the table.
+#[test]
+fn the_table_seen_past_an_object_is_free_space_for_its_fit() {
+    use supertoroid::scene::objects::{SceneOptions, segment};
+    let shape = Shape::new(0.03, 0.03, 0.008, 2.5, 1.0, 1.0);
+    let (depth, camera, _, pose) = table_frame(shape, DVec3::ZERO);
+    let whole = Roi {
+        x: 0,
+        y: 0,
+        width: camera.intrinsics.width,
+        height: camera.intrinsics.height,
+    };
+    let pixels = back_project_pixels(&depth, &options(&camera, whole), None).unwrap();
+    let segmentation = segment(&pixels, &SceneOptions::default(), 1).unwrap();
+    assert_eq!(segmentation.objects.len(), 1);
+    let free = &segmentation.objects[0].seen_through;
+    let canonical: Vec<DVec3> = free
+        .iter()
+        .map(|&q| pose.to_canonical(camera.pose.to_world(q)))
+        .collect();
+    assert!(free.len() >= 300, "{} free points", free.len());
+    for (p, q) in canonical.iter().zip(free) {
+        assert!(shape.inside_outside(*p) > 1.0, "{p:?} is inside the ring");
+        assert!(camera.pose.to_world(*q).z > 0.0, "{q:?} is under the table");
+    }
+}
+
 #[test]
 fn a_table_top_frame_is_split_into_its_objects_and_each_is_fitted_with_its_model() {
     use supertoroid::fit::{FitOptions, Model};

@@ -129,6 +129,9 @@ pub struct FitOptions {
     /// towards the object): the object does not reach below it (see
     /// [`free_space::below_support`])
     pub support: Option<crate::model::Plane>,
+    /// points the sensor saw past, in the cloud's frame: free space the object does not
+    /// fill (a scene gives the rays to the table seen through and beside each object)
+    pub seen_through: Vec<DVec3>,
     /// how many other downsampling seeds to try when, with a viewpoint, the fit leaves
     /// most of its visible surface without points, or the fit stays off a precise cloud
     /// (then up to [`PRECISE_MISFIT_RETRIES`] where these leave it there; see
@@ -185,6 +188,7 @@ impl Default for FitOptions {
             known_shape: [None; 6],
             viewpoint: Viewpoint::Auto,
             support: None,
+            seen_through: Vec::new(),
             unseen_surface_retries: UNSEEN_SURFACE_RETRIES,
             noise_model: true,
             thorough: false,

@@ -88,9 +88,23 @@ pub fn fit_scene(
     let segmentation = segment(frame, scene, options.seed)?;
     let segment_ms = start.elapsed().as_secs_f64() * 1e3;
     let clouds = object_clouds(&segmentation);
-    let options = object_options(options, &segmentation.plane, scene.table_prior);
-    let batch: Vec<(&[DVec3], &FitOptions)> =
-        clouds.iter().map(|c| (c.as_slice(), &options)).collect();
+    let options: Vec<FitOptions> = segmentation
+        .objects
+        .iter()
+        .map(|o| {
+            object_options(
+                options,
+                &segmentation.plane,
+                scene.table_prior,
+                &o.seen_through,
+            )
+        })
+        .collect();
+    let batch: Vec<(&[DVec3], &FitOptions)> = clouds
+        .iter()
+        .zip(&options)
+        .map(|(c, o)| (c.as_slice(), o))
+        .collect();
     let fits = fit_batch(evaluator, &batch)?
         .into_iter()
         .map(|r| r.map_err(|e| e.to_string()))
@@ -112,10 +126,18 @@ pub fn object_clouds(segmentation: &Segmentation) -> Vec<Vec<DVec3>> {
 }
 
 /// An object's fit options: the camera (the origin of the frame) as the viewpoint,
-/// unless the caller said otherwise, and with `table_prior` the table as the support it
-/// does not reach below.
-pub fn object_options(options: &FitOptions, table: &Plane, table_prior: bool) -> FitOptions {
+/// unless the caller said otherwise; the free space the camera saw past it
+/// ([`crate::scene::objects::Segment::seen_through`]: the table through a ring's hole
+/// and beside it); and with `table_prior` the table as the support it does not reach
+/// below.
+pub fn object_options(
+    options: &FitOptions,
+    table: &Plane,
+    table_prior: bool,
+    seen_through: &[DVec3],
+) -> FitOptions {
     FitOptions {
+        seen_through: seen_through.to_vec(),
         viewpoint: match options.viewpoint {
             Viewpoint::Auto => Viewpoint::At(DVec3::ZERO, ViewpointSource::Camera),
             given => given,

@@ -62,6 +62,10 @@ impl Default for SceneOptions {
 pub struct Segment {
     pub points: Vec<DVec3>,
     pub pixels: Vec<(u32, u32)>,
+    /// free space the camera saw past the object: points on its rays to the table
+    /// within the object's pixel box, inside the object's box and in front of the table
+    /// (`seen_through`)
+    pub seen_through: Vec<DVec3>,
 }
 
 impl Segment {
@@ -142,6 +146,7 @@ pub fn segment(
         let segment = Segment {
             points: cluster.iter().map(|&i| above_points[i]).collect(),
             pixels: cluster.iter().map(|&i| frame.pixels[above[i]]).collect(),
+            seen_through: Vec::new(),
         };
         let size = half_diagonal(&segment.points);
         if segment.points.len() < options.min_points
@@ -163,12 +168,77 @@ pub fn segment(
         });
     }
     objects.sort_by_key(|o| std::cmp::Reverse(o.points.len()));
+    let table: Vec<usize> = (0..points.len())
+        .filter(|&i| plane.signed_distance(points[i]).abs() <= tolerance)
+        .collect();
+    for object in &mut objects {
+        object.seen_through = seen_through(object, &table, frame, 3.0 * tolerance);
+    }
     Ok(Segmentation {
         plane,
         table_points,
         objects,
         dropped,
     })
+}
+
+/// The most rays to the table an object's free space is sampled on.
+const SEEN_THROUGH_RAYS: usize = 400;
+
+/// Free space past an object: on the camera's rays (from the origin) to the table points
+/// within the object's pixel box, three points (at a quarter, half and three quarters)
+/// where the ray crosses the object's box, grown by a tenth of its size and at least
+/// `margin` in front of the table point. The box is the camera's, so over a flat object
+/// it reaches well above it: most points bound the object from above and beside, few
+/// fall in a ring's hole. (Points every 15% of the size along each ray, which fill the
+/// hole, did worse: `bench scenes` sets 750000-770000 right 213 against 215, and a
+/// third slower.)
+fn seen_through(object: &Segment, table: &[usize], frame: &Pixels, margin: f64) -> Vec<DVec3> {
+    let [x, y, w, h] = object.pixel_box();
+    let rays: Vec<DVec3> = table
+        .iter()
+        .filter(|&&i| {
+            let (u, v) = frame.pixels[i];
+            (x..x + w).contains(&u) && (y..y + h).contains(&v)
+        })
+        .map(|&i| frame.points[i])
+        .collect();
+    let (lo, hi) = object.points.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+    );
+    let grow = DVec3::splat(0.1 * (hi - lo).length());
+    let (lo, hi) = (lo - grow, hi + grow);
+    let mut out = Vec::new();
+    for &end in rays
+        .iter()
+        .step_by(rays.len().div_ceil(SEEN_THROUGH_RAYS).max(1))
+    {
+        let length = end.length();
+        if length <= margin {
+            continue;
+        }
+        // the ray s·end, s in [0, 1 - margin/length], clipped to the box (slabs)
+        let (mut s0, mut s1) = (0.0_f64, 1.0 - margin / length);
+        for k in 0..3 {
+            let d = end[k];
+            if d.abs() < 1e-12 {
+                if !(lo[k]..=hi[k]).contains(&0.0) {
+                    s1 = -1.0;
+                }
+                continue;
+            }
+            let (a, b) = (lo[k] / d, hi[k] / d);
+            s0 = s0.max(a.min(b));
+            s1 = s1.min(a.max(b));
+        }
+        if s1 > s0 {
+            for f in [0.25, 0.5, 0.75] {
+                out.push(end * (s0 + f * (s1 - s0)));
+            }
+        }
+    }
+    out
 }
 
 /// The plane with its normal towards the origin (the camera).

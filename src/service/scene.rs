@@ -140,10 +140,15 @@ pub async fn scene(
     options.model = Some(options.model.unwrap_or(Model::Auto));
     let jobs = object_clouds(&segmentation)
         .into_iter()
-        .map(|points| {
+        .zip(&segmentation.objects)
+        .map(|(points, object)| {
             let mut job: FitJob = options.job(points, state.config.max_points)?;
-            job.options =
-                object_options(&job.options, &segmentation.plane, scene_options.table_prior);
+            job.options = object_options(
+                &job.options,
+                &segmentation.plane,
+                scene_options.table_prior,
+                &object.seen_through,
+            );
             Ok(job)
         })
         .collect::<Result<Vec<_>, ApiError>>()?;
