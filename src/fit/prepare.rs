@@ -147,6 +147,11 @@ pub(super) fn prepare<'a>(
         stage1_free.extend(free_space::below_support(&stage1_pts, normal, offset));
         stage2_free.extend(free_space::below_support(&stage2_pts, normal, offset));
     }
+    if !o.seen_through.iter().all(|p| p.is_finite()) {
+        return Err(FitError::InvalidOption(
+            "the points seen through must be finite".into(),
+        ));
+    }
     if !o.seen_through.is_empty() {
         let free: Vec<DVec3> = o.seen_through.iter().map(|&p| norm.point(p)).collect();
         stage1_free.extend(&free);
