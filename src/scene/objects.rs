@@ -134,10 +134,9 @@ pub fn segment(
     let above: Vec<usize> = (0..points.len())
         .filter(|&i| plane.signed_distance(points[i]) > tolerance)
         .collect();
-    let table_points = points
-        .iter()
-        .filter(|&&p| plane.signed_distance(p).abs() <= tolerance)
-        .count();
+    let table: Vec<usize> = (0..points.len())
+        .filter(|&i| plane.signed_distance(points[i]).abs() <= tolerance)
+        .collect();
     let above_points: Vec<DVec3> = above.iter().map(|&i| points[i]).collect();
     let clusters = euclidean_clusters(&above_points, GAP_SHARE * median_depth(&above_points));
     let mut objects = Vec::new();
@@ -168,15 +167,12 @@ pub fn segment(
         });
     }
     objects.sort_by_key(|o| std::cmp::Reverse(o.points.len()));
-    let table: Vec<usize> = (0..points.len())
-        .filter(|&i| plane.signed_distance(points[i]).abs() <= tolerance)
-        .collect();
     for object in &mut objects {
         object.seen_through = seen_through(object, &table, frame, 3.0 * tolerance);
     }
     Ok(Segmentation {
         plane,
-        table_points,
+        table_points: table.len(),
         objects,
         dropped,
     })
