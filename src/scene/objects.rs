@@ -199,10 +199,7 @@ fn seen_through(object: &Segment, table: &[usize], frame: &Pixels, margin: f64) 
         })
         .map(|&i| frame.points[i])
         .collect();
-    let (lo, hi) = object.points.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), &p| (lo.min(p), hi.max(p)),
-    );
+    let (lo, hi) = bounding_box(&object.points);
     let grow = DVec3::splat(0.1 * (hi - lo).length());
     let (lo, hi) = (lo - grow, hi + grow);
     let mut out = Vec::new();
@@ -257,12 +254,17 @@ fn median_depth(points: &[DVec3]) -> f64 {
     *z.select_nth_unstable_by(points.len() / 2, f64::total_cmp).1
 }
 
-/// Half the diagonal of the points' axis-aligned box.
-fn half_diagonal(points: &[DVec3]) -> f64 {
-    let (lo, hi) = points.iter().fold(
+/// The points' axis-aligned box, (least, greatest) corner.
+fn bounding_box(points: &[DVec3]) -> (DVec3, DVec3) {
+    points.iter().fold(
         (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
         |(lo, hi), &p| (lo.min(p), hi.max(p)),
-    );
+    )
+}
+
+/// Half the diagonal of the points' axis-aligned box.
+fn half_diagonal(points: &[DVec3]) -> f64 {
+    let (lo, hi) = bounding_box(points);
     0.5 * (hi - lo).length()
 }
 

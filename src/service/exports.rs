@@ -65,15 +65,6 @@ pub fn export_path(id: &str) -> String {
     path + "/export"
 }
 
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn an_id_with_reserved_characters_is_percent_encoded() {
-        assert_eq!(super::export_path("a-1"), "/v1/scene/a-1/export");
-        assert_eq!(super::export_path("a/b c"), "/v1/scene/a%2Fb%20c/export");
-    }
-}
-
 #[derive(Debug, Default, Deserialize, IntoParams)]
 #[into_params(parameter_in = Query)]
 #[serde(deny_unknown_fields)]
@@ -91,8 +82,8 @@ pub struct ExportQuery {
 /// on the table plane under gravity along its normal), `scene.urdf` (objects fixed to
 /// `world`, the table a box) and each object's visual OBJ and collision STL pieces, in
 /// the camera's frame or the world frame the query gives. Objects whose fit failed are
-/// left out. The service keeps the last
-/// 64 scenes; an older or unknown id is 404 `scene_not_found`.
+/// left out. The service keeps the last 64 scenes; an older or unknown id is 404
+/// `scene_not_found`.
 #[utoipa::path(
     get, path = "/v1/scene/{id}/export",
     params(("id" = String, Path, description = "the scene's `request_id`"), ExportQuery),
@@ -135,15 +126,7 @@ pub async fn export(
     };
     let export = SceneExport::new(scene.objects, Some(scene.plane), world, density)
         .map_err(|e| ApiError::unprocessable("nothing_to_export", e))?;
-    let archive = tokio::task::spawn_blocking(move || tar_archive(&export))
-        .await
-        .map_err(|e| {
-            ApiError::new(
-                StatusCode::INTERNAL_SERVER_ERROR,
-                "internal",
-                format!("the export task failed: {e}"),
-            )
-        })?;
+    let archive = super::geometry::off_the_workers(move || tar_archive(&export)).await?;
     Ok((
         [
             (header::CONTENT_TYPE, "application/x-tar".to_owned()),
@@ -155,4 +138,13 @@ pub async fn export(
         archive,
     )
         .into_response())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn an_id_with_reserved_characters_is_percent_encoded() {
+        assert_eq!(super::export_path("a-1"), "/v1/scene/a-1/export");
+        assert_eq!(super::export_path("a/b c"), "/v1/scene/a%2Fb%20c/export");
+    }
 }

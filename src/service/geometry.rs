@@ -198,7 +198,7 @@ fn surface_points(
 
 /// Runs CPU work of milliseconds to seconds on tokio's blocking pool, off the async
 /// workers that serve every other request.
-async fn off_the_workers<T: Send + 'static>(
+pub(super) async fn off_the_workers<T: Send + 'static>(
     work: impl FnOnce() -> T + Send + 'static,
 ) -> Result<T, ApiError> {
     tokio::task::spawn_blocking(work)

@@ -126,15 +126,8 @@ pub async fn scene(
     let (pixels, _, _) = frame.back_project(&state, depth, mask)?;
     let seed = params.options.seed.unwrap_or(0);
     let scene_options = params.scene;
-    let segmentation = tokio::task::spawn_blocking(move || segment(&pixels, &scene_options, seed))
-        .await
-        .map_err(|e| {
-            ApiError::new(
-                axum::http::StatusCode::INTERNAL_SERVER_ERROR,
-                "internal",
-                format!("the segmentation task failed: {e}"),
-            )
-        })??;
+    let segmentation =
+        super::geometry::off_the_workers(move || segment(&pixels, &scene_options, seed)).await??;
     let segment_ms = start.elapsed().as_secs_f64() * 1e3;
     let mut options = params.options.clone();
     options.model = Some(options.model.unwrap_or(Model::Auto));
