@@ -1,6 +1,6 @@
 //! Development: fit suite cases as the bench presents them (camera frame, no options; or
 //! with GIVEN set, the camera's position given) and print truth, fit, errors and timing;
-//! with SEARCH set, by `Method::Search`; with TRUTH set, the likelihood of the fit against the truth refined.
+//! with PAPER set, by `Method::Paper`; with TRUTH set, the likelihood of the fit against the truth refined.
 use supertoroid::bench::synthetic::{Presentation, category, presented};
 use supertoroid::eval::{CpuEvaluator, Normalization};
 use supertoroid::fit::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, fit, likelihood, objective};
@@ -18,8 +18,8 @@ fn main() {
         let (partial, noise, outliers) = category((seed % 1000) as usize % 180);
         let case = make_case(seed, partial, noise, outliers);
         let (points, viewpoint, back) = presented(&case, presentation);
-        let method = if std::env::var("SEARCH").is_ok() {
-            supertoroid::fit::Method::Search
+        let method = if std::env::var("PAPER").is_ok() {
+            supertoroid::fit::Method::Paper
         } else {
             Default::default()
         };

@@ -6,7 +6,7 @@
 //! with the camera's position given; successes by the suite's rule and median fit times.
 //!
 //! `cargo run --release --example independent_views -- [CASES] [FIRST_SEED] [METHOD]`
-//! (METHOD: default, search or paper).
+//! (METHOD: default or paper).
 
 use clap::ValueEnum;
 use glam::{DQuat, DVec3};
@@ -69,7 +69,7 @@ fn main() {
         .next()
         .map_or(900_000, |a| a.parse().expect("FIRST_SEED"));
     let method = args.next().map_or(Method::Default, |a| {
-        Method::from_str(&a, true).expect("METHOD: default, search or paper")
+        Method::from_str(&a, true).expect("METHOD: default or paper")
     });
     let mut evaluator = CpuEvaluator::new();
     let variants = [

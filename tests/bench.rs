@@ -409,30 +409,6 @@ fn the_grading_rule_calls_the_truth_good_and_a_planted_fit_bad() {
     assert_eq!(far.grade, Grade::Decent, "{far:?}");
 }
 
-/// `bench --retries` is `fit --retries`: 0 to 16, anything else a usage error.
-#[test]
-fn bench_takes_the_retries_of_fit() {
-    let out = out_dir("retries");
-    let v = bench(
-        &[
-            "synthetic",
-            "--cases",
-            "2",
-            "--backend",
-            "cpu",
-            "--retries",
-            "0",
-        ],
-        &out,
-        "synthetic",
-    );
-    assert_eq!(v["cases"].as_array().unwrap().len(), 2);
-    let o = run_bench(&["synthetic", "--cases", "1", "--retries", "17"], &out);
-    assert!(!o.status.success());
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(stderr.contains("--retries"), "{stderr}");
-}
-
 #[test]
 fn bench_models_judges_the_choice_between_supertoroid_and_superellipsoid() {
     let out = out_dir("models");

@@ -354,7 +354,7 @@ fn a_sampled_view_names_the_viewpoint_that_fit_takes() {
         (json["shape"]["a4"].as_f64().unwrap() - 2.0).abs() < 1e-9,
         "{json}"
     );
-    // bad options are named: a3 given twice, an unknown parameter, too many retries
+    // bad options are named: a3 given twice, an unknown parameter, an unknown flag
     for (args, named) in [
         (vec!["--known", "a3=0.02", "--a3", "0.02"], "a3 given twice"),
         (vec!["--known", "a9=1"], "a9"),

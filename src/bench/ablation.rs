@@ -82,8 +82,15 @@ pub fn run(
                 skip: variants[v].into_iter().collect(),
                 ..base.clone()
             };
-            let report = fit(evaluator.as_mut(), &points, &options)
-                .map_err(|e| format!("case {case_seed}: {e}"))?;
+            // (a cloud the object screen refuses is a failed case, as in `bench synthetic`)
+            let report = match fit(evaluator.as_mut(), &points, &options) {
+                Ok(report) => report,
+                Err(crate::fit::FitError::NoObject(_)) => {
+                    outcomes[v].push((case_seed, partial, false, 0.0));
+                    continue;
+                }
+                Err(e) => return Err(format!("case {case_seed}: {e}")),
+            };
             let fitted = report.fitted.1;
             let pose = Pose::new(
                 back.rotation * fitted.rotation,

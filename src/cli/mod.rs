@@ -118,18 +118,12 @@ pub struct BenchArgs {
     /// cases) into DIR, relative to --out unless absolute; the report embeds them
     #[arg(long, global = true)]
     pub render: Option<PathBuf>,
-    /// pipeline for the fits (paper, synthetic): default, search (one bounded search, measured against the default) or paper
+    /// pipeline for the fits (paper, synthetic): default (the search) or paper
     #[arg(long, global = true, value_enum, default_value = "default")]
     pub method: crate::fit::Method,
     /// model of the fits: as `fit --model` (default: as `fit`; auto for `models`)
     #[arg(long, global = true, value_enum)]
     pub model: Option<crate::fit::Model>,
-    /// fit as `fit --thorough` does (paper, synthetic)
-    #[arg(long, global = true)]
-    pub thorough: bool,
-    /// as `fit --retries` (synthetic: its single views have the camera's position)
-    #[arg(long, global = true, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=crate::fit::MAX_UNSEEN_SURFACE_RETRIES))]
-    pub retries: u64,
     /// the fits' time budget in milliseconds (paper, synthetic; see `fit --time-budget-ms`)
     #[arg(long, global = true)]
     pub time_budget_ms: Option<f64>,
@@ -321,29 +315,16 @@ pub struct FitArgs {
     /// through
     #[arg(long, allow_hyphen_values = true)]
     pub viewpoint: Option<String>,
-    /// other downsampling seeds to try when, with --viewpoint, the fit leaves most of the
-    /// surface it shows the sensor without points, or the fit stays off a precise cloud
-    /// or off its points' own scatter (then up to 16 in all where these leave it so); 0
-    /// turns the retries off; at most 16
-    #[arg(long, default_value_t = crate::fit::UNSEEN_SURFACE_RETRIES, value_parser = clap::value_parser!(u64).range(0..=crate::fit::MAX_UNSEEN_SURFACE_RETRIES))]
-    pub retries: u64,
-    /// skip the noise model's polish of noisy fits and its rescue of uncovered single
-    /// views (faster by about 20-100 ms on such clouds; their sizes and eps then carry
-    /// the noise's bias)
+    /// skip the noise model's refinement of noisy fits (faster on such clouds; their
+    /// sizes and eps then carry the noise's bias)
     #[arg(long)]
     pub no_noise_model: bool,
-    /// with --viewpoint: retry every noisy single view as an uncovered one is retried,
-    /// and keep the most likely of the covered fits under the noise model (by default
-    /// only those whose fit is just covered; all of them gained nothing more on the
-    /// ground-truth suite, at about 3 times the time of such fits)
-    #[arg(long)]
-    pub thorough: bool,
     /// points of the noise model's final polish of a noisy fit (all of the cloud's where
     /// it has fewer); 0 turns the polish off (faster by 20-150 ms on such clouds)
     #[arg(long, default_value_t = crate::fit::POLISH_POINTS)]
     pub polish_points: usize,
-    /// milliseconds after which the checks of the finished fit (retries, rescues, the
-    /// last polish) no longer start; the first fit always completes (default: no budget)
+    /// milliseconds after which the noise model's last polish no longer starts; the
+    /// search always completes (default: no budget)
     #[arg(long)]
     pub time_budget_ms: Option<f64>,
     /// also write the fitted surface as a PLY mesh with normals
@@ -568,9 +549,7 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         viewpoint,
         method: args.method,
         model: args.model,
-        unseen_surface_retries: args.retries,
         noise_model: !args.no_noise_model,
-        thorough: args.thorough,
         polish_points: args.polish_points,
         time_budget_ms: args.time_budget_ms,
         ..Default::default()
@@ -695,8 +674,6 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         model: args
             .model
             .unwrap_or(crate::fit::FitOptions::default().model),
-        thorough: args.thorough,
-        unseen_surface_retries: args.retries,
         skip: args.skip.clone(),
         time_budget_ms: args.time_budget_ms,
         ..Default::default()

@@ -6,34 +6,22 @@
 /// A stage of [`super::fit_batch`] that a fit may run without.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Stage {
-    /// the Cauchy-loss refinement of the chosen least-squares fit (`refine_robustly`)
+    /// the Cauchy-loss refinement of a precise cloud's least-squares candidates
+    /// (`robust_least_squares` in [`super::search`])
     RobustRefine,
-    /// the noise model's second reading of the top view (`refine_both_readings`)
+    /// the other reading of the top view, in the search and in the polish
+    /// ([`super::prepare`]'s `turned_dual`)
     DualReading,
-    /// an inferred viewpoint tested against an all-round cloud (`settle_inferred_viewpoints`)
+    /// a cloud whose viewpoint was only inferred searched as a view from nowhere too, the
+    /// likelier reading kept ([`super::search::batch`])
     SettleInferredView,
-    /// a given viewpoint the fit contradicts refitted without it
-    /// (`refit_without_inconsistent_viewpoints`)
+    /// a given viewpoint the fit contradicts dropped, the cloud searched again without it
     InconsistentViewpoint,
-    /// views without an open hole refitted with axes across the line of sight
-    /// (`retry_across_line_of_sight`)
-    AcrossLineOfSight,
-    /// other downsampling seeds for a bare, off-scatter or eps-pinned fit
-    /// (`retry_unseen_surfaces`)
-    UnseenSurfaceRetries,
-    /// more seeds where those leave it so (`retry_lasting_misfits`)
-    LastingMisfitRetries,
-    /// the noise model once more on up to 4000 points (`polish_on_more_points`)
+    /// the noise model once more on up to 4000 points ([`super::search::polish`])
     PolishOnMorePoints,
 }
 
-/// Whether every cloud of a batch leaves `stage` out (a check of the finished fits runs
-/// on the batch as a whole).
-pub fn all_skip(clouds: &[(&[glam::DVec3], &super::FitOptions)], stage: Stage) -> bool {
-    !clouds.is_empty() && clouds.iter().all(|(_, o)| o.skip.contains(&stage))
-}
-
-/// The stage's name (as `--skip` takes it and `timing_ms.checks` reports it).
+/// The stage's name (as `--skip` takes it and `timing_ms.over_budget` reports it).
 pub fn name(stage: Stage) -> String {
     use clap::ValueEnum;
     stage

@@ -36,7 +36,7 @@
 //! 139 -> 176; the fits it runs on take 20-150 ms more (see the README). With the view
 //! model corrected (back faces culled, grazing faces kept: `visibility`; the pose
 //! moving the view weights in the gradient) and the kernel cut at 4 sigmas instead of
-//! 3.5 ([`CUTOFF`]), 268 and 238 (with the rescue and retries of `fit`).
+//! 3.5 ([`CUTOFF`]), 268 and 238. The search polishes with it ([`super::search::polish`]).
 
 pub(crate) mod visibility;
 

@@ -160,7 +160,7 @@ pub fn choose(points: &[glam::DVec3], holed: FitReport, genus0: FitReport) -> Fi
     let spent = start.elapsed().as_secs_f64() * 1e3;
     // (the two fits ran in one batch, each timed as the whole of it)
     chosen.timing_ms.total = both_ms + spent;
-    chosen.timing_ms.checks.insert("model_choice".into(), spent);
+    chosen.timing_ms.stages.insert("model_choice".into(), spent);
     if kind == Model::Superellipsoid {
         chosen.shape.a4 = 0.0;
         chosen.fitted.0.a4 = 0.0;

@@ -40,11 +40,9 @@ pub(super) fn start_for_axis(points: &[DVec3], axis: DVec3, hint: DVec3, a4: f64
 pub(super) enum StartSet {
     /// [`prepare`]'s starts
     Usual,
-    /// only the hole axes across the line of sight ([`starts::across_line_of_sight`])
-    AcrossLineOfSight,
     /// the search's broad set: the usual starts, the hole axes across the line of sight,
     /// and the normal lines' starts moved behind the skin the sensor saw
-    /// ([`behind_the_skin`])
+    /// ([`starts::behind_the_skin`])
     Broad,
 }
 
@@ -65,9 +63,6 @@ pub(super) struct Prepared<'a> {
     pub(super) bounds: Bounds,
     pub(super) opts1: SolverOptions,
     pub(super) opts2: SolverOptions,
-    /// a stage-1 runner-up in another basin within this cost ratio goes on to stage 2
-    pub(super) runner_up_ratio: Option<f64>,
-    pub(super) hole_preference: f64,
     /// solutions that [`overreach`] beyond this rank below every one that does not
     pub(super) max_overreach: Option<f64>,
     /// Cauchy scale of the final refinement in robust residual scales, if it runs
@@ -159,11 +154,8 @@ pub(super) fn prepare<'a>(
     }
     let bounds = o.bounds();
     let paper = o.method == Method::Paper;
-    let (a4_reward, hole_preference) = if paper {
-        (PAPER_A4_REWARD, PAPER_A4_REWARD)
-    } else {
-        (o.a4_reward, o.hole_preference)
-    };
+    // (the paper's stage 2 rewards a wider hole)
+    let a4_reward = if paper { PAPER_A4_REWARD } else { 0.0 };
     let loss = if paper {
         Loss::Squared
     } else {
@@ -325,7 +317,7 @@ pub(super) fn prepare<'a>(
 
     let opts2 = SolverOptions {
         loss,
-        shape_prior: [0.0, 0.0, o.a3_penalty, -a4_reward, 0.0, 0.0],
+        shape_prior: [0.0, 0.0, 0.0, -a4_reward, 0.0, 0.0],
         fixed: opts1.fixed,
         // steps of 1e-4 of the cloud's RMS radius no longer move the fit; near the end
         // Gauss-Newton on a Huber loss converges only linearly, so this saves half the
@@ -346,14 +338,13 @@ pub(super) fn prepare<'a>(
         stage2_free,
         starts: match start_set {
             StartSet::Usual => starts,
-            StartSet::AcrossLineOfSight => across_starts,
             StartSet::Broad => {
                 // the normal lines' starts (the first three) behind the skin
                 let behind: Vec<Candidate> = match o.viewpoint.position() {
                     Some(v) if !paper => starts
                         .iter()
                         .take(3)
-                        .filter_map(|s| behind_the_skin(s, norm.point(v)))
+                        .filter_map(|s| starts::behind_the_skin(s, norm.point(v)))
                         .collect(),
                     _ => Vec::new(),
                 };
@@ -367,8 +358,6 @@ pub(super) fn prepare<'a>(
         bounds,
         opts1,
         opts2,
-        runner_up_ratio: (!paper).then_some(o.runner_up_ratio),
-        hole_preference,
         max_overreach: (!paper).then_some(MAX_OVERREACH),
         refine_scale: (!paper && o.refine_scale > 0.0).then_some(o.refine_scale),
         viewpoint: o.viewpoint.position().map(|v| norm.point(v)),
@@ -451,115 +440,12 @@ impl Prepared<'_> {
             return None;
         }
         // a roundish top view is its own other reading
-        if (fitted.shape.eps2 - 1.0).abs() < DUAL_MIN_ROUNDNESS_GAP {
+        if (fitted.shape.eps2 - 1.0).abs() < search::polish::DUAL_MIN_ROUNDNESS_GAP {
             return None;
         }
         let mut dual = starts::turned_dual(fitted);
         dual.shape = self.supported_bounds(fitted).interior(&dual.shape);
         Some(dual)
-    }
-
-    /// Bodies collapsed onto the stage-2 sample along the hole axis of `fitted`
-    /// ([`start_for_axis`] with each of the [`RESCUE_A4`]), the known dimensions held;
-    /// and, for a view across the hole axis, each of them again moved away from the
-    /// sensor by its mean radius ([`behind_the_skin`]).
-    pub(super) fn collapsed_starts(&self, fitted: &Candidate) -> Vec<Candidate> {
-        let axis = fitted.pose.axis();
-        let hint = fitted.pose.rotation * DVec3::X;
-        let collapsed: Vec<Candidate> = RESCUE_A4
-            .iter()
-            .map(|&a4| {
-                let mut start = start_for_axis(&self.stage2_pts, axis, hint, a4);
-                start.shape = holding_known(start.shape, &self.known);
-                start
-            })
-            .collect();
-        let behind: Vec<Candidate> = collapsed
-            .iter()
-            .filter_map(|start| behind_the_skin(start, self.viewpoint?))
-            .collect();
-        collapsed.into_iter().chain(behind).collect()
-    }
-
-    /// Each start (with a hole) refined by the noise model seen from `viewpoint`, the
-    /// [`RESCUE_KEPT`] most likely after [`RESCUE_FIRST_ITERATIONS`] on to convergence; of
-    /// those whose visible surface the points cover and whose free space holds, the most
-    /// likely.
-    pub(super) fn most_likely_covered(
-        &self,
-        starts: Vec<Candidate>,
-        viewpoint: DVec3,
-    ) -> Option<likelihood::Refined> {
-        let refine = |start: &Candidate, sigma: f64, iterations: usize| {
-            likelihood::refine(
-                &self.stage2_pts,
-                start,
-                sigma,
-                LIKELIHOOD_OUTLIER_WEIGHT,
-                Some(viewpoint),
-                &self.likelihood_limits(start),
-                iterations,
-            )
-        };
-        let mut first: Vec<likelihood::Refined> = starts
-            .into_iter()
-            .filter(|s| s.shape.a4 > 1.0)
-            .filter_map(|mut start| {
-                let noise = report::noise_sigma(
-                    &start.shape,
-                    &start.pose,
-                    &self.stage2_pts,
-                    NOISE_CHECK_SAMPLE,
-                );
-                // a collapsed start's section must hold the noise's spread
-                if self.known[2].is_none() {
-                    start.shape.a3 = start.shape.a3.max(2.0 * noise);
-                }
-                refine(&start, noise, RESCUE_FIRST_ITERATIONS)
-            })
-            .collect();
-        first.sort_by(|a, b| a.objective.total_cmp(&b.objective));
-        let converge = |r: &likelihood::Refined, start: &Candidate| {
-            let more = refine(start, r.sigma, likelihood::MAX_ITERATIONS)?;
-            Some(likelihood::Refined {
-                iterations: r.iterations + more.iterations,
-                ..more
-            })
-        };
-        let kept: Vec<likelihood::Refined> = first
-            .iter()
-            .take(RESCUE_KEPT)
-            .filter_map(|r| converge(r, &r.candidate))
-            .collect();
-        // and the other reading of each one's top view, where it is the more likely after
-        // a few steps
-        let duals: Vec<likelihood::Refined> = kept
-            .iter()
-            .filter_map(|r| {
-                let opening = refine(
-                    &self.turned_dual(&r.candidate)?,
-                    r.sigma,
-                    DUAL_FIRST_ITERATIONS,
-                )?;
-                (opening.objective < r.objective).then(|| converge(&opening, &opening.candidate))?
-            })
-            .collect();
-        // (a dual must be more likely by DUAL_READING_MARGIN)
-        let merits = kept.into_iter().map(|r| (r.objective, r)).chain(
-            duals
-                .into_iter()
-                .map(|r| (r.objective + DUAL_READING_MARGIN, r)),
-        );
-        merits
-            .filter(|(_, r)| !collapsed_section(r))
-            .filter(|(_, r)| {
-                coverage::visible_coverage(&r.candidate, &self.stage2_pts, viewpoint)
-                    >= coverage::MIN_VISIBLE_COVERAGE
-                    && free_space::violated_fraction(&r.candidate, &self.stage2_free)
-                        <= free_space::MAX_VIOLATED_FRACTION
-            })
-            .min_by(|a, b| a.0.total_cmp(&b.0))
-            .map(|(_, r)| r)
     }
 
     pub(super) fn overreaches(&self, candidate: &Candidate, sample: &[DVec3]) -> bool {

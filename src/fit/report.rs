@@ -37,9 +37,10 @@ pub struct Quality {
     pub standard_errors: Option<super::uncertainty::StandardErrors>,
 }
 
-/// Where a fit's time went (milliseconds): the first fit's stages 1 and 2 (the noise
-/// model's refinement a part of stage 2), then each check of the finished fit that
-/// looked at it, by the name of its [`super::ablation::Stage`]; `total` is all of it.
+/// Where a fit's time went (milliseconds): the search's least-squares round 1
+/// (`stage1`) and its later rounds (`stage2`, the likelihood's refinement `noise_model`
+/// a part of it), then each later stage by name (the polish as its
+/// [`super::ablation::Stage`] is named, `model_choice`); `total` is all of it.
 #[derive(Clone, Debug, Default, Serialize, utoipa::ToSchema)]
 pub struct Timing {
     pub stage1: f64,
@@ -47,8 +48,8 @@ pub struct Timing {
     /// the noise model's share of stage 2
     pub noise_model: f64,
     #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
-    pub checks: std::collections::BTreeMap<String, f64>,
-    /// the checks that did not run because the fit's time had reached its budget
+    pub stages: std::collections::BTreeMap<String, f64>,
+    /// the stages that did not run because the fit's time had reached its budget
     /// ([`super::FitOptions::time_budget_ms`])
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub over_budget: Vec<String>,
@@ -104,37 +105,18 @@ pub struct FitReport {
     /// [`super::free_space::violated_fraction`]); None without a viewpoint
     #[serde(skip)]
     pub free_space_violation: Option<f64>,
-    /// with a viewpoint: the least-squares fit, before the noise model moved it, left its
-    /// visible surface uncovered (the model can move a wrong basin's fit onto the points'
-    /// surface; the retries must still see it)
-    #[serde(skip)]
-    pub uncovered_before_model: bool,
-    /// the fit's noise was more than [`super::NOISE_OVER_SCATTER`] times the cloud's own
-    /// scatter, so the noise model did not run: a wrong basin's distance, not noise
-    #[serde(skip)]
-    pub noise_above_scatter: bool,
-    /// the noise model refined this fit ([`Quality::noise_sigma`] is then the model's)
+    /// the noise model refined this fit at a noise that matters to it, so the polish
+    /// takes it on ([`Quality::noise_sigma`] is then the model's)
     #[serde(skip)]
     pub noise_modelled: bool,
-    /// how much less likely the other reading of the top view was than this fit under
-    /// the noise model, on the sample it was fitted to; none where it was not tried
-    #[serde(skip)]
-    pub other_reading_gap: Option<f64>,
-    /// the noise model's rescue of an uncovered single view made this fit (see
-    /// `rescue_unseen_surface` in `fit`)
-    #[serde(skip)]
-    pub rescued: bool,
 }
 
 /// The warning of a fit that stays off a precise cloud: its median distance above
 /// rounding but under [`PRECISE_MISFIT_WARNING`] of the size, where a noise-free cloud
 /// (a CAD model's, a simulator's) fitted in the right basin leaves rounding (below 1e-6
 /// of the size on the suite's noise-free clouds) and a depth sensor's noise leaves far
-/// more. With the retries of `fit` (up to [`super::PRECISE_MISFIT_RETRIES`]) no fit on
-/// the suite carries it; with 3 retries it warned the two noise-free single views left
-/// in a wrong basin (30051, 30123: sizes 240% and 14% off), and no right fit. A real
-/// sensor with noise under about 0.15% of the object's size would be warned too, which
-/// the message says.
+/// more. A real sensor with noise under about 0.15% of the object's size would be warned
+/// too, which the message says.
 pub(super) fn misfit_warning(shape: &Shape, quality: &Quality) -> Option<String> {
     let relative = quality.median_distance / shape.size();
     (super::PRECISE_MISFIT.start..PRECISE_MISFIT_WARNING)
@@ -149,9 +131,8 @@ pub(super) fn misfit_warning(shape: &Shape, quality: &Quality) -> Option<String>
         })
 }
 
-/// The largest median distance (share of the size) that `misfit_warning` warns at
-/// (the retries of `fit` look up to [`super::PRECISE_MISFIT`]'s end, 3e-3: one right fit
-/// 9% off in size sits at 1.8e-3).
+/// The largest median distance (share of the size) that `misfit_warning` warns at (one
+/// right fit 9% off in size sits at 1.8e-3).
 pub const PRECISE_MISFIT_WARNING: f64 = 1e-3;
 
 /// Distances of every input point to the fitted surface, summarised.

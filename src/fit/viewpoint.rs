@@ -6,8 +6,8 @@
 //!
 //! A view from the origin has every point in front of the origin, outside the cloud.
 //! That does not tell a view from an all-round cloud seen from outside: the fit does, by
-//! the noise model's likelihood of the points seen from the origin against spread all
-//! round its fit (`settle_inferred_viewpoints` in `fit`).
+//! searching the cloud in both readings and keeping the likelier under the noise model
+//! (`fit_batch_searched` in `fit::search::batch`).
 
 use glam::DVec3;
 use serde::Serialize;

@@ -64,28 +64,19 @@ pub struct FitRequestOptions {
     #[schema(schema_with = crate::fit::viewpoint::request_schema)]
     #[serde(default)]
     pub viewpoint: Option<Viewpoint>,
-    /// other downsampling seeds to try when, with a viewpoint, the fit leaves most of the
-    /// surface it shows the sensor without points, or the fit stays off a precise cloud
-    /// or off its points' own scatter (then up to 16 in all) (default 3, 0 turns them off, at most 16); each retry costs
-    /// about one fit, and only such fits are retried
-    pub retries: Option<u64>,
-    /// polish a noisy fit under a model of the noise, and rescue an uncovered single view
-    /// with it (default true; false saves 20-100 ms on such clouds, and leaves the noise's
-    /// bias in sizes and eps)
+    /// refine a noisy fit under a model of the noise (default true; false is faster on
+    /// such clouds, and leaves the noise's bias in sizes and eps)
     pub noise_model: Option<bool>,
-    /// with a viewpoint: retry every noisy single view and keep the most likely covered
-    /// fit under the noise model (default false; about 1% more fits within tolerance on
-    /// the ground-truth suite, at 3-4 times the time of such fits)
-    pub thorough: Option<bool>,
     /// points of the noise model's final polish of a noisy fit (default 4000; all of
     /// the cloud's where it has fewer; 0 turns the polish off, saving 20-150 ms on such
     /// clouds)
     pub polish_points: Option<usize>,
-    /// milliseconds after which the checks of the finished fit (retries, rescues, the
-    /// last polish) no longer start (default: no budget; the first fit always completes;
-    /// the checks left out are named in `timing_ms.over_budget`)
+    /// milliseconds after which the noise model's last polish no longer starts (default:
+    /// no budget; the search always completes; a stage left out is named in
+    /// `timing_ms.over_budget`)
     pub time_budget_ms: Option<f64>,
-    /// pipeline: default; search (one bounded search on the noise model, measured against the default); or paper (the paper's procedure, a baseline)
+    /// pipeline: default (one bounded search on the noise model) or paper (the paper's
+    /// procedure, a baseline)
     pub method: Option<crate::fit::Method>,
     /// model: supertoroid (a4 free), superellipsoid (a4 = 0) or auto (both fitted, the
     /// lower BIC chosen; `model` in the answer gives both)
@@ -174,16 +165,6 @@ impl FitRequestOptions {
             }
             None => None,
         };
-        let retries = self.retries.unwrap_or(defaults.unseen_surface_retries);
-        if retries > crate::fit::MAX_UNSEEN_SURFACE_RETRIES {
-            return Err(ApiError::unprocessable(
-                "invalid_option",
-                format!(
-                    "retries must be at most {}",
-                    crate::fit::MAX_UNSEEN_SURFACE_RETRIES
-                ),
-            ));
-        }
         Ok(FitJob {
             points,
             options: FitOptions {
@@ -196,9 +177,7 @@ impl FitRequestOptions {
                 viewpoint: self.viewpoint.unwrap_or_default(),
                 method: self.method.unwrap_or_default(),
                 model: self.model.unwrap_or(defaults.model),
-                unseen_surface_retries: retries,
                 noise_model: self.noise_model.unwrap_or(defaults.noise_model),
-                thorough: self.thorough.unwrap_or(defaults.thorough),
                 polish_points: limit(self.polish_points, defaults.polish_points, "polish_points")?,
                 time_budget_ms: self.time_budget_ms,
                 ..defaults

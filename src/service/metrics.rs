@@ -92,7 +92,7 @@ impl Metrics {
         registry.register("errors", "Error responses by code", errors.clone());
         registry.register(
             "fit_warnings",
-            "Fits that carried a warning, by kind (noisy_for_this_shape, unseen_surface, \
+            "Fits that carried a warning, by kind (uncertain_shape, off_its_points, \
              viewpoint_ignored, off_a_precise_cloud): a rising rate is a sensor or set-up to \
              look at",
             warnings.clone(),
@@ -117,8 +117,8 @@ impl Metrics {
             ("noise_model", t.noise_model),
             ("total", t.total),
         ];
-        let checks = t.checks.iter().map(|(name, ms)| (name.as_str(), *ms));
-        for (stage, ms) in stages.into_iter().chain(checks) {
+        let later = t.stages.iter().map(|(name, ms)| (name.as_str(), *ms));
+        for (stage, ms) in stages.into_iter().chain(later) {
             self.stage_seconds
                 .get_or_create(&StageLabel {
                     stage: stage.into(),

@@ -5,15 +5,15 @@
 
 use super::*;
 
-/// [`fit_batch`] for a batch holding clouds for `Method::Search`: those searched, the
-/// others fitted by their own method, the answers in the callers' order.
+/// [`fit_batch`] for a batch: the clouds of the default method searched, the paper's
+/// fitted by its own procedure, the answers in the callers' order.
 pub(in crate::fit) fn fit_batch_by_method(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
     let searched: Vec<bool> = clouds
         .iter()
-        .map(|(_, o)| o.method == Method::Search)
+        .map(|(_, o)| o.method == Method::Default)
         .collect();
     let pick = |want: bool| -> Vec<_> {
         clouds
@@ -24,7 +24,7 @@ pub(in crate::fit) fn fit_batch_by_method(
             .collect()
     };
     let mut found = fit_batch_searched(evaluator, &pick(true))?.into_iter();
-    let mut fitted = fit_batch_unscreened(evaluator, &pick(false))?.into_iter();
+    let mut fitted = fit_batch_paper(evaluator, &pick(false))?.into_iter();
     Ok(searched
         .iter()
         .map(|&s| if s { found.next() } else { fitted.next() })
@@ -36,7 +36,8 @@ pub(in crate::fit) fn fit_batch_by_method(
 /// first; a cloud whose viewpoint was only inferred (the frame's origin) is searched
 /// both as a view from there and as a view from nowhere, in the same lockstep batch, and
 /// the fit more likely under its own reading of the cloud stands. A given viewpoint that
-/// the fit contradicts is dropped with a warning and the cloud searched again.
+/// the fit contradicts is dropped with a warning and the cloud searched again. Then the
+/// polish ([`polish::polish`]), in the reading each cloud was fitted in.
 fn fit_batch_searched(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
@@ -46,7 +47,7 @@ fn fit_batch_searched(
     let nowhere: Vec<(usize, FitOptions)> = resolved
         .iter()
         .enumerate()
-        .filter(|(_, (o, _))| inferred(o))
+        .filter(|(_, (o, _))| inferred(o) && !o.skip.contains(&Stage::SettleInferredView))
         .map(|(i, (o, _))| {
             (
                 i,
@@ -83,6 +84,7 @@ fn fit_batch_searched(
             _ => test.score(&other, false) < test.score(view, true),
         };
         if all_round {
+            resolved[*i].0.viewpoint = Viewpoint::None;
             resolved[*i].1 = resolved[*i].1.dropped(ALL_ROUND);
             results[*i] = Ok(other);
         }
@@ -93,8 +95,10 @@ fn fit_batch_searched(
         .enumerate()
         .filter_map(|(i, r)| {
             let violated = r.as_ref().ok()?.free_space_violation?;
-            (violated > free_space::MAX_VIOLATED_FRACTION && !inferred(&resolved[i].0))
-                .then_some((i, violated))
+            (violated > free_space::MAX_VIOLATED_FRACTION
+                && !inferred(&resolved[i].0)
+                && !resolved[i].0.skip.contains(&Stage::InconsistentViewpoint))
+            .then_some((i, violated))
         })
         .collect();
     if !contradicted.is_empty() {
@@ -116,6 +120,7 @@ fn fit_batch_searched(
         for (&(i, violated), refit) in contradicted.iter().zip(refits) {
             let spent = results[i].as_ref().map_or(0.0, |r| r.timing_ms.total) + waited;
             let warning = viewpoint_ignored_warning(violated);
+            resolved[i].0.viewpoint = Viewpoint::None;
             resolved[i].1 = resolved[i].1.dropped(&warning);
             results[i] = refit.map(|mut r| {
                 r.timing_ms.total = spent;
@@ -124,6 +129,7 @@ fn fit_batch_searched(
             });
         }
     }
+    polish::polish(evaluator, &with_resolved(clouds, &resolved), &mut results);
     for (r, (_, used)) in results.iter_mut().zip(resolved) {
         if let Ok(r) = r {
             r.viewpoint = used;
@@ -176,7 +182,12 @@ fn searched_once(
                 f.stage1_iterations,
                 evaluator,
             );
-            r.noise_modelled = best.modelled;
+            // (a fit the likelihood refined to a noise too small for the model to matter
+            // is a precise one: the polish passes it by)
+            r.noise_modelled = best.modelled && noisy(p, &best.candidate, best.sigma);
+            r.warnings.extend(polish::off_its_points(&r, || {
+                p.scatter().map(|s| s * p.norm.scale)
+            }));
             r.timing_ms = Timing {
                 stage1: f.round1_ms,
                 stage2: f.round2_ms + f.finalists_ms,
