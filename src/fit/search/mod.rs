@@ -377,17 +377,6 @@ pub(super) fn search_group(
     // measure).
     let sets2: Vec<PointSet> = group.iter().map(|(_, p)| p.stage2_set()).collect();
     evaluator.set_point_sets_with_free_space(&sets2)?;
-    let noise: Vec<Option<f64>> = group
-        .iter()
-        .zip(&kept1)
-        .map(|((_, p), kept)| {
-            let best = kept.first()?;
-            // (the cloud's own scatter, or the fit's residuals where those are the smaller:
-            // the scatter reads a precise thin ring's curvature as noise)
-            let noise = p.scatter().map_or(best.sigma, |s| s.min(best.sigma));
-            noisy(p, &best.candidate, noise).then_some(noise)
-        })
-        .collect();
     let mids: Vec<Sample> = group
         .iter()
         .enumerate()
@@ -399,6 +388,36 @@ pub(super) fn search_group(
                 .copied()
                 .collect();
             sample(p, &mid, cloud)
+        })
+        .collect();
+    // The likeliest start straight into the robust rounds of least squares: its residual
+    // scale, converged, is the noise the cloud shows that candidate (ten iterations in,
+    // it still reads a precise cloud's outliers and distance as noise), and on a precise
+    // cloud it is a finalist (outliers pull the Huber fit of a precise view into other
+    // basins often enough).
+    let mut direct: Vec<Option<Scored>> = Vec::with_capacity(group.len());
+    for (cloud, (_, p)) in group.iter().enumerate() {
+        direct.push(match kept1[cloud].first() {
+            Some(first) if !dropped[cloud] => Some(robust_candidate(
+                evaluator,
+                p,
+                &mids[cloud],
+                cloud,
+                *first,
+                ROUND1_SHORTFALL,
+            )?),
+            _ => None,
+        });
+    }
+    let noise: Vec<Option<f64>> = group
+        .iter()
+        .zip(&direct)
+        .map(|((_, p), direct)| {
+            let best = direct.as_ref()?;
+            // (the cloud's own scatter, or the fit's residuals where those are the smaller:
+            // the scatter reads a precise thin ring's curvature as noise)
+            let noise = p.scatter().map_or(best.sigma, |s| s.min(best.sigma));
+            noisy(p, &best.candidate, noise).then_some(noise)
         })
         .collect();
     // precise clouds: least squares on the stage-2 sample, every candidate in one batch,
@@ -437,13 +456,7 @@ pub(super) fn search_group(
             for c in most_likely_distinct(own, 2) {
                 refined.push(robust_candidate(evaluator, p, &mids[cloud], cloud, c, 0)?);
             }
-            // and the likeliest start straight into the robust rounds: outliers pull the
-            // Huber fit of a precise view into other basins often enough
-            if let Some(first) = kept1[cloud].first() {
-                let direct =
-                    robust_candidate(evaluator, p, &mids[cloud], cloud, *first, ROUND1_SHORTFALL)?;
-                refined.push(direct);
-            }
+            refined.extend(direct[cloud]);
             round2[cloud] = refined;
         }
     }
