@@ -327,13 +327,20 @@ pub(super) fn search_group(
         .enumerate()
         .map(|(cloud, (_, p))| p.viewpoint.is_none() && !nowhere_twin[cloud])
         .collect();
-    let by_distances = if from_nowhere.contains(&true) {
+    // (the same candidates at the same residual scales, scored by their distances alone)
+    let by_distances: Vec<Scored> = if from_nowhere.contains(&true) {
         let samples: Vec<Sample> = group
             .iter()
             .map(|(_, p)| Sample::new(&p.stage1_pts, None, false))
             .collect();
-        let refs: Vec<&Sample> = samples.iter().collect();
-        scored(evaluator, &live, &live_sets, &refs, group)?
+        scored1
+            .iter()
+            .zip(&live_sets)
+            .map(|(c, &set)| Scored {
+                score: samples[set].score(&c.candidate, c.sigma),
+                ..*c
+            })
+            .collect()
     } else {
         Vec::new()
     };
