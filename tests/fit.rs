@@ -1030,10 +1030,9 @@ fn ninety_percent_of_the_suite_ci_subset() {
 }
 
 /// The noise model's polish on all of a cloud's points (`FitOptions::polish_points`):
-/// the eight views of seed set 810000 (as users post them: in the camera's frame, no
-/// options) that `bench ablation` found right with the polish and wrong without it (noisy
-/// views whose search ends with eps or sizes just off). At least six are recovered with it
-/// and at most two without.
+/// eight views of seed set 810000 (as users post them: in the camera's frame, no options)
+/// where `bench ablation` found the polish decides (noisy views whose search ends with eps
+/// or sizes just off). At least six are recovered with it and at most two without.
 #[test]
 fn the_polish_on_all_points_recovers_noisy_fits() {
     use supertoroid::bench::synthetic::{Presentation, category, presented};
