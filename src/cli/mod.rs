@@ -293,7 +293,8 @@ pub struct FitArgs {
     /// known hole axis x,y,z in the cloud's frame (e.g. 0,0,1 for "on a table, hole up")
     #[arg(long, allow_hyphen_values = true)]
     pub axis: Option<String>,
-    /// pipeline: default; search (one bounded search on the noise model, measured against the default); or paper (the paper's procedure as a baseline; see the README)
+    /// pipeline: default (one bounded search on the noise model) or paper (the paper's
+    /// procedure as a baseline; see the README)
     #[arg(long, value_enum, default_value = "default")]
     pub method: crate::fit::Method,
     /// model: supertoroid (a4 free: a hole or none), superellipsoid (a4 = 0), or auto
