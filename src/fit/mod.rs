@@ -442,28 +442,22 @@ fn fit_group(
         &opts1,
     )?;
     // (the paper takes each cloud's lowest stage-1 cost to stage 2)
-    let mut finalists = Vec::new();
+    let mut candidates = Vec::new();
     let mut stage1_iterations = Vec::new();
     for cloud in 0..group.len() {
-        let solutions = || {
-            stage1
-                .iter()
-                .zip(&sets)
-                .filter(move |(_, s)| **s == cloud)
-                .map(|(sol, _)| sol)
-        };
+        let solutions = || of_cloud(&stage1, &sets, cloud);
         stage1_iterations.push(solutions().map(|s| s.iterations).max().unwrap_or(0));
         let best = solutions()
             .min_by(|a, b| a.cost.total_cmp(&b.cost))
             .expect("one start at least");
-        finalists.push(vec![best.candidate]);
+        candidates.push(best.candidate);
     }
     let t1 = start.elapsed();
 
     // Stage 2: each cloud's finalist on its cloud's 1000-point sample.
     let samples: Vec<PointSet> = group.iter().map(|(_, p)| p.stage2_set()).collect();
     evaluator.set_point_sets_with_free_space(&samples)?;
-    let (candidates, sets) = flatten(finalists.into_iter());
+    let sets: Vec<usize> = (0..group.len()).collect();
     let stage2 = solve_on(
         evaluator,
         &candidates,
@@ -520,6 +514,15 @@ pub fn overreach(candidate: &Candidate, points: &[DVec3]) -> f64 {
     let s = &candidate.shape;
     let reach = DVec3::new(s.a1, s.a2, s.a3);
     (reach / extent.max(DVec3::splat(1e-9))).max_element()
+}
+
+/// The items of a batch that belong to `cloud` (`sets`: each item's cloud).
+fn of_cloud<'a, T>(items: &'a [T], sets: &'a [usize], cloud: usize) -> impl Iterator<Item = &'a T> {
+    items
+        .iter()
+        .zip(sets)
+        .filter(move |(_, s)| **s == cloud)
+        .map(|(item, _)| item)
 }
 
 /// Concatenates per-cloud candidate lists, with the cloud index of each candidate.

@@ -560,15 +560,6 @@ pub(super) fn search_group(
     Ok(found)
 }
 
-/// The items of a batch that belong to `cloud` (`sets`: each item's cloud).
-fn of_cloud<'a, T>(items: &'a [T], sets: &'a [usize], cloud: usize) -> impl Iterator<Item = &'a T> {
-    items
-        .iter()
-        .zip(sets)
-        .filter(move |(_, s)| **s == cloud)
-        .map(|(item, _)| item)
-}
-
 /// The most likely of a cloud's refined finalists.
 fn choose(refined: &[Scored]) -> Scored {
     *refined
