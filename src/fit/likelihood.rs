@@ -435,15 +435,22 @@ impl Problem<'_> {
         if with_derivatives {
             d_cells = vec![[DVec3::ZERO; 6]; m];
             d_log_areas = vec![[0.0; 6]; m];
-            for k in 0..6 {
-                let mut moved = shape;
-                let step = 1e-6 * shape[k].abs().max(1e-2);
-                moved[k] += step;
-                let (canonical2, areas2, normals2) = surface_cells(&moved, rings, sectors);
-                let areas2 = match view {
-                    Some(_) => weigh(areas2, &to_world(&canonical2), &normals2),
-                    None => areas2,
-                };
+            // (the six moved surfaces are most of an evaluation's work: built in parallel)
+            let moved: Vec<(f64, Vec<DVec3>, Vec<f64>)> = (0..6)
+                .into_par_iter()
+                .map(|k| {
+                    let mut moved = shape;
+                    let step = 1e-6 * shape[k].abs().max(1e-2);
+                    moved[k] += step;
+                    let (canonical2, areas2, normals2) = surface_cells(&moved, rings, sectors);
+                    let areas2 = match view {
+                        Some(_) => weigh(areas2, &to_world(&canonical2), &normals2),
+                        None => areas2,
+                    };
+                    (step, canonical2, areas2)
+                })
+                .collect();
+            for (k, (step, canonical2, areas2)) in moved.into_iter().enumerate() {
                 d_log_area[k] = (areas2.iter().sum::<f64>() / area - 1.0) / step;
                 for j in 0..m {
                     d_cells[j][k] = rotation * ((canonical2[j] - canonical[j]) / step);
@@ -561,7 +568,9 @@ impl Problem<'_> {
             (density.ln(), g)
         };
         let n = self.points.len() as f64;
-        let (log_likelihood, gradient, outer) = self
+        // fixed chunks summed in order: the same sums whatever the threads' schedule, so a
+        // seed always gives the same fit
+        let partials: Vec<(f64, Vector, Matrix)> = self
             .points
             .par_chunks(128)
             .map(|chunk| {
@@ -576,10 +585,12 @@ impl Problem<'_> {
                 }
                 sums
             })
-            .reduce(
-                || (0.0, Vector::zeros(), Matrix::zeros()),
-                |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2),
-            );
+            .collect();
+        let (log_likelihood, gradient, outer) = partials
+            .into_iter()
+            .fold((0.0, Vector::zeros(), Matrix::zeros()), |a, b| {
+                (a.0 + b.0, a.1 + b.1, a.2 + b.2)
+            });
         (-log_likelihood / n, -gradient / n, outer / n)
     }
 }

@@ -120,15 +120,15 @@ impl Grid {
         // the longest step of the top view's polar samples, per sample, on the outermost
         // sweep (radius 1 + a4 in units of the top view)
         const PROBE: usize = 256;
-        let top = |j: usize| {
-            let (x, y, _, _) = unit_superellipse(TAU * j as f64 / PROBE as f64, shape.eps2);
-            (shape.a1 * x, shape.a2 * y)
-        };
-        let longest = (0..PROBE)
+        let top: Vec<(f64, f64)> = (0..=PROBE)
             .map(|j| {
-                let (a, b) = (top(j), top(j + 1));
-                (b.0 - a.0).hypot(b.1 - a.1)
+                let (x, y, _, _) = unit_superellipse(TAU * j as f64 / PROBE as f64, shape.eps2);
+                (shape.a1 * x, shape.a2 * y)
             })
+            .collect();
+        let longest = top
+            .windows(2)
+            .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
             .fold(0.0, f64::max);
         let outer = 1.0 + shape.a4;
         let sweep = ((longest * PROBE as f64 * outer / (SWEEP_SIGMAS * sigma)).ceil() as usize)
