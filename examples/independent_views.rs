@@ -8,14 +8,17 @@
 //! `cargo run --release --example independent_views -- [CASES] [FIRST_SEED] [METHOD]`
 //! (METHOD: default or paper).
 
+#[path = "shared/placement.rs"]
+mod placement;
+
 use clap::ValueEnum;
-use glam::{DQuat, DVec3};
+use glam::DVec3;
 use rand::Rng;
 use supertoroid::eval::CpuEvaluator;
 use supertoroid::fit::{FitOptions, Method, Viewpoint, fit};
 use supertoroid::model::{Pose, Shape};
 use supertoroid::suite::ground_truth::compare;
-use supertoroid::synth::{self, Camera, Intrinsics};
+use supertoroid::synth::{self, Intrinsics};
 
 /// One view in its camera's frame, with the truth in that frame.
 fn view(seed: u64) -> (Vec<DVec3>, Shape, Pose) {
@@ -25,15 +28,7 @@ fn view(seed: u64) -> (Vec<DVec3>, Shape, Pose) {
     let intrinsics = Intrinsics::REALSENSE_640X480;
     // far enough for the object to fill about half the image's height
     let distance = intrinsics.fy * 2.0 * shape.size() / (0.5 * intrinsics.height as f64);
-    let pose = Pose::new(
-        DQuat::from_axis_angle(axis, rng.random_range(-3.1..3.1)),
-        DVec3::new(
-            rng.random_range(-0.1..0.1) * distance,
-            rng.random_range(-0.1..0.1) * distance,
-            distance,
-        ),
-    );
-    let camera = Camera::look_at(intrinsics, DVec3::ZERO, pose.translation, DVec3::NEG_Y);
+    let (pose, camera) = placement::in_front_of_camera(&mut rng, axis, distance, intrinsics);
     let rendered = synth::render_view(&shape, &pose, &camera, 0.0001).expect("a valid view");
     let count = rng.random_range(1000..=5000);
     let mut points: Vec<DVec3> = synth::subsample(&rendered.points, count, &mut rng)
