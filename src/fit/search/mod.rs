@@ -205,13 +205,15 @@ fn robust_scale(residuals: &[f64]) -> f64 {
     1.4826 * report::median(&mut magnitudes)
 }
 
-/// The likelihood of each solution on its cloud's sample: (candidate, scale, score),
-/// residuals from the evaluator's current point sets.
+/// The likelihood of each solution on its cloud's sample: (candidate, scale, score), the
+/// scale from its residuals on the evaluator's current point set of its cloud, whose
+/// surface holds `uploaded[set]` points.
 fn scored(
     evaluator: &mut dyn Evaluator,
     solutions: &[Solution],
     sets: &[usize],
     samples: &[&Sample],
+    uploaded: &[usize],
     group: &[(usize, Prepared)],
 ) -> Result<Vec<Scored>, FitError> {
     let candidates: Vec<Candidate> = solutions.iter().map(|s| s.candidate).collect();
@@ -219,7 +221,9 @@ fn scored(
     let mut offset = 0;
     let mut out = Vec::with_capacity(solutions.len());
     for (solution, &set) in solutions.iter().zip(sets) {
-        let n = samples[set].points.len();
+        // (a candidate's residuals are as many as its set's points on the evaluator,
+        // whatever sample it is scored on)
+        let n = uploaded[set];
         let sigma = robust_scale(&residuals[offset..offset + n]);
         offset += n;
         out.push(Scored {
@@ -310,7 +314,15 @@ pub(super) fn search_group(
         .collect();
     let (live, live_sets): (Vec<Solution>, Vec<usize>) = live.into_iter().unzip();
     let sample_refs: Vec<&Sample> = samples1.iter().collect();
-    let scored1 = scored(evaluator, &live, &live_sets, &sample_refs, group)?;
+    let uploaded1: Vec<usize> = group.iter().map(|(_, p)| p.stage1_pts.len()).collect();
+    let scored1 = scored(
+        evaluator,
+        &live,
+        &live_sets,
+        &sample_refs,
+        &uploaded1,
+        group,
+    )?;
     let stage1_iterations: Vec<usize> = (0..group.len())
         .map(|cloud| {
             of_cloud(&live, &live_sets, cloud)
@@ -455,7 +467,15 @@ pub(super) fn search_group(
             .collect();
         let solutions = solve_on(evaluator, &candidates, &sets, &boxes, &opts2)?;
         let sample_refs: Vec<&Sample> = mids.iter().collect();
-        let scored2 = scored(evaluator, &solutions, &sets, &sample_refs, group)?;
+        let uploaded2: Vec<usize> = group.iter().map(|(_, p)| p.stage2_pts.len()).collect();
+        let scored2 = scored(
+            evaluator,
+            &solutions,
+            &sets,
+            &sample_refs,
+            &uploaded2,
+            group,
+        )?;
         for &cloud in &precise {
             let p = &group[cloud].1;
             let own = of_cloud(&scored2, &sets, cloud).copied().collect();
