@@ -19,6 +19,8 @@ pub enum Stage {
     InconsistentViewpoint,
     /// the noise model once more on up to 4000 points ([`super::search::polish`])
     PolishOnMorePoints,
+    /// points far from every other set aside before the fit ([`super::isolated`])
+    SetAsideIsolatedPoints,
 }
 
 /// The stage's name (as `--skip` takes it and `timing_ms.over_budget` reports it).

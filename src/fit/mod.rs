@@ -23,6 +23,7 @@ pub mod ablation;
 pub mod coverage;
 pub mod free_space;
 mod inferred_view;
+pub mod isolated;
 pub mod likelihood;
 pub mod model_choice;
 pub mod objective;
@@ -210,6 +211,23 @@ pub fn fit_batch(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
+    // points far from every other set aside first: the screen and the fit see the rest
+    let cleaned: Vec<Option<Vec<DVec3>>> = clouds
+        .iter()
+        .map(|(points, o)| {
+            // (the paper's procedure is the baseline as published: it keeps every point)
+            (o.method != Method::Paper && !o.skip.contains(&Stage::SetAsideIsolatedPoints))
+                .then(|| isolated::without_isolated(points))
+                .flatten()
+        })
+        .collect();
+    let inputs: Vec<usize> = clouds.iter().map(|(points, _)| points.len()).collect();
+    let clouds: Vec<(&[DVec3], &FitOptions)> = clouds
+        .iter()
+        .zip(&cleaned)
+        .map(|((points, o), kept)| (kept.as_deref().unwrap_or(points), *o))
+        .collect();
+    let clouds = &clouds[..];
     // each cloud with an object in it: its model's fit, or both models' for auto
     let plans: Vec<Result<Vec<FitOptions>, FitError>> = clouds
         .iter()
@@ -228,14 +246,20 @@ pub fn fit_batch(
     Ok(clouds
         .iter()
         .zip(plans)
-        .map(|((points, _), plan)| {
+        .zip(inputs)
+        .map(|(((points, _), plan), input)| {
             let options = plan?;
+            let with_input = |mut r: FitReport| {
+                r.points.isolated = input - points.len();
+                r.points.input = input;
+                r
+            };
             if options.len() == 2 {
                 let holed = fits.next().expect("one fit per model");
                 let genus0 = fits.next().expect("one fit per model");
                 match (holed, genus0) {
-                    (Ok(h), Ok(g)) => Ok(model_choice::choose(points, h, g)),
-                    (Ok(one), Err(_)) | (Err(_), Ok(one)) => Ok(one),
+                    (Ok(h), Ok(g)) => Ok(with_input(model_choice::choose(points, h, g))),
+                    (Ok(one), Err(_)) | (Err(_), Ok(one)) => Ok(with_input(one)),
                     (Err(e), Err(_)) => Err(e),
                 }
             } else {
@@ -243,7 +267,7 @@ pub fn fit_batch(
                     .expect("one fit per screened cloud")
                     .map(|mut r| {
                         r.model = ModelOut::requested(&r.shape);
-                        r
+                        with_input(r)
                     })
             }
         })
@@ -596,6 +620,7 @@ fn report(
             stage1: p.stage1_pts.len(),
             stage2: p.stage2_pts.len(),
             polish: None,
+            isolated: 0,
         },
         warnings,
         fitted: (shape, pose),

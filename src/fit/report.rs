@@ -77,6 +77,14 @@ pub struct PointsOut {
     /// misfit's; see [`super::FitOptions::polish_points`])
     #[serde(skip_serializing_if = "Option::is_none")]
     pub polish: Option<usize>,
+    /// the input points far from every other, set aside before the fit
+    /// ([`super::isolated`]): the fit and its quality are the other points'
+    #[serde(skip_serializing_if = "is_zero")]
+    pub isolated: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// The result of `supertoroid fit` (and of the service), documented in the README.
@@ -183,7 +191,7 @@ pub fn noise_sigma(shape: &Shape, pose: &Pose, points: &[DVec3], sample: usize) 
 }
 
 /// The upper median (0 for no values); reorders `values`.
-pub(super) fn median(values: &mut [f64]) -> f64 {
+pub(crate) fn median(values: &mut [f64]) -> f64 {
     if values.is_empty() {
         return 0.0;
     }
