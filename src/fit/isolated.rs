@@ -8,6 +8,7 @@
 
 use glam::DVec3;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rayon::prelude::*;
 use std::num::NonZeroUsize;
 
 /// The neighbour whose distance measures how isolated a point is.
@@ -27,7 +28,7 @@ pub fn without_isolated(points: &[DVec3]) -> Option<Vec<DVec3>> {
     let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&entries).ok()?;
     let k = NonZeroUsize::new(NEIGHBOURS + 1).expect("non-zero");
     let distances: Vec<f64> = entries
-        .iter()
+        .par_iter()
         .map(|p| {
             tree.query(p)
                 .nearest_n::<SquaredEuclidean<f64>>(k)
