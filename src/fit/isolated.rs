@@ -19,9 +19,10 @@ pub const NEIGHBOURS: usize = 8;
 pub const ISOLATION_FACTOR: f64 = 5.0;
 
 /// The cloud without its isolated points; None where none is isolated (or the cloud is
-/// too small to tell).
+/// too small to tell, or holds a non-finite point).
 pub fn without_isolated(points: &[DVec3]) -> Option<Vec<DVec3>> {
-    if points.len() <= 4 * NEIGHBOURS {
+    // (a non-finite point is the cloud check's to refuse, which comes next)
+    if points.len() <= 4 * NEIGHBOURS || !points.iter().all(|p| p.is_finite()) {
         return None;
     }
     let entries: Vec<[f64; 3]> = points.iter().map(|p| p.to_array()).collect();
