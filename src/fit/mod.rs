@@ -212,20 +212,24 @@ pub fn fit_batch(
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
     // points far from every other set aside first: the screen and the fit see the rest
-    let cleaned: Vec<Option<Vec<DVec3>>> = clouds
+    // (with the time each took, where it ran)
+    let cleaned: Vec<(Option<Vec<DVec3>>, Option<f64>)> = clouds
         .iter()
         .map(|(points, o)| {
             // (the paper's procedure is the baseline as published: it keeps every point)
-            (o.method != Method::Paper && !o.skip.contains(&Stage::SetAsideIsolatedPoints))
-                .then(|| isolated::without_isolated(points))
-                .flatten()
+            if o.method == Method::Paper || o.skip.contains(&Stage::SetAsideIsolatedPoints) {
+                return (None, None);
+            }
+            let start = Instant::now();
+            let kept = isolated::without_isolated(points);
+            (kept, Some(start.elapsed().as_secs_f64() * 1e3))
         })
         .collect();
     let inputs: Vec<usize> = clouds.iter().map(|(points, _)| points.len()).collect();
     let clouds: Vec<(&[DVec3], &FitOptions)> = clouds
         .iter()
         .zip(&cleaned)
-        .map(|((points, o), kept)| (kept.as_deref().unwrap_or(points), *o))
+        .map(|((points, o), (kept, _))| (kept.as_deref().unwrap_or(points), *o))
         .collect();
     let clouds = &clouds[..];
     // each cloud with an object in it: its model's fit, or both models' for auto
@@ -247,11 +251,18 @@ pub fn fit_batch(
         .iter()
         .zip(plans)
         .zip(inputs)
-        .map(|(((points, _), plan), input)| {
+        .zip(cleaned.iter().map(|(_, spent)| *spent))
+        .map(|((((points, _), plan), input), spent)| {
             let options = plan?;
             let with_input = |mut r: FitReport| {
                 r.points.isolated = input - points.len();
                 r.points.input = input;
+                if let Some(spent) = spent {
+                    r.timing_ms.total += spent;
+                    r.timing_ms
+                        .stages
+                        .insert(ablation::name(Stage::SetAsideIsolatedPoints), spent);
+                }
                 r
             };
             if options.len() == 2 {

@@ -39,8 +39,9 @@ pub struct Quality {
 
 /// Where a fit's time went (milliseconds): the search's least-squares round 1
 /// (`stage1`) and its later rounds (`stage2`, the likelihood's refinement `noise_model`
-/// a part of it), then each later stage by name (the polish as its
-/// [`super::ablation::Stage`] is named, `model_choice`); `total` is all of it.
+/// a part of it), then each other stage by name (setting isolated points aside and the
+/// polish as their [`super::ablation::Stage`]s are named, `model_choice`); `total` is all
+/// of it.
 #[derive(Clone, Debug, Default, Serialize, utoipa::ToSchema)]
 pub struct Timing {
     pub stage1: f64,
