@@ -8,9 +8,6 @@
 //! `cargo run --release --example independent_views -- [CASES] [FIRST_SEED] [METHOD]`
 //! (METHOD: default or paper).
 
-#[path = "shared/placement.rs"]
-mod placement;
-
 use clap::ValueEnum;
 use glam::DVec3;
 use rand::Rng;
@@ -28,7 +25,8 @@ fn view(seed: u64) -> (Vec<DVec3>, Shape, Pose) {
     let intrinsics = Intrinsics::REALSENSE_640X480;
     // far enough for the object to fill about half the image's height
     let distance = intrinsics.fy * 2.0 * shape.size() / (0.5 * intrinsics.height as f64);
-    let (pose, camera) = placement::in_front_of_camera(&mut rng, axis, distance, intrinsics);
+    let (pose, camera) =
+        supertoroid::suite::broad::in_front_of_camera(&mut rng, axis, distance, intrinsics);
     let rendered = synth::render_view(&shape, &pose, &camera, 0.0001).expect("a valid view");
     let count = rng.random_range(1000..=5000);
     let mut points: Vec<DVec3> = synth::subsample(&rendered.points, count, &mut rng)
