@@ -3,7 +3,8 @@
 //! `/v1/fit/batch` runs) against the four fitted one after another; and a single-view
 //! cloud of the ground-truth suite with and without its camera's position (the
 //! free-space points a viewpoint adds); and a noisy full cloud with and without the noise
-//! model.
+//! model; and setting stray points aside on clouds the size of a single view and of a
+//! depth frame's mask.
 //! `cargo bench --bench fit` (lavapipe is the GPU on a machine without one).
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
@@ -182,5 +183,40 @@ fn bench_noise_model(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_fit, bench_single_view, bench_noise_model);
+/// Setting isolated points aside (`fit::isolated`, the fit's first stage, on the CPU
+/// whatever the evaluator): a noisy ring of 5,000, 20,000 and 60,000 points (a single
+/// view; a depth frame's mask) with 5% strays over a box four times its extent.
+fn bench_isolated(c: &mut Criterion) {
+    use glam::{DQuat, DVec3};
+    use rand::Rng;
+    use supertoroid::model::{Pose, Shape};
+    let mut group = timed_group(c, "set aside isolated points", 3);
+    let shape = Shape::new(0.06, 0.05, 0.02, 2.0, 0.8, 1.0);
+    let pose = Pose::new(DQuat::IDENTITY, DVec3::new(0.0, 0.0, 0.6));
+    for count in [5_000, 20_000, 60_000] {
+        let mut rng = supertoroid::synth::rng(7);
+        let mut points = supertoroid::synth::sample_surface(&shape, &pose, count, &mut rng);
+        supertoroid::synth::add_noise(&mut points, 0.001, &mut rng);
+        for _ in 0..count / 20 {
+            let offset = DVec3::new(
+                rng.random_range(-0.5..0.5),
+                rng.random_range(-0.5..0.5),
+                rng.random_range(-0.5..0.5),
+            );
+            points.push(pose.translation + offset);
+        }
+        group.bench_function(BenchmarkId::new("cpu", count), |b| {
+            b.iter(|| supertoroid::fit::isolated::without_isolated(&points))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(
+    benches,
+    bench_fit,
+    bench_single_view,
+    bench_noise_model,
+    bench_isolated
+);
 criterion_main!(benches);

@@ -23,8 +23,9 @@ pub struct ModelCase {
     pub partial: bool,
     pub noise: f64,
     pub outliers: f64,
-    /// the model the fit answered with
-    pub chosen: Model,
+    /// the model the fit answered with; None where the object screen refused the cloud
+    /// (`no_object_found`: a failed case)
+    pub chosen: Option<Model>,
     pub model_right: bool,
     /// within the kind's rule (the model right too)
     pub success: bool,
@@ -71,35 +72,53 @@ pub fn run(
             viewpoint,
             ..base.clone()
         };
-        let report = fit(evaluator.as_mut(), &points, &options)
-            .map_err(|e| format!("case {case_seed}: {e}"))?;
-        let (shape, fitted) = report.fitted;
-        let pose = Pose::new(
-            back.rotation * fitted.rotation,
-            back.to_world(fitted.translation),
-        );
-        let chosen = report.model.kind;
-        let model_right = match kind {
-            Kind::Holed => chosen == Model::Supertoroid,
-            Kind::Superellipsoid => chosen == Model::Superellipsoid,
+        let report = match fit(evaluator.as_mut(), &points, &options) {
+            Ok(report) => Some(report),
+            // a true object refused by the object screen is a failed case, not a stop
+            Err(crate::fit::FitError::NoObject(_)) => None,
+            Err(e) => return Err(format!("case {case_seed}: {e}")),
         };
-        let chamfer = relative_chamfer((&case.shape, &case.pose), (&shape, &pose));
-        let within = match kind {
-            Kind::Holed => compare((&case.shape, &case.pose), (&shape, &pose)).success(),
-            Kind::Superellipsoid => chamfer < CHAMFER_BOUND,
-        };
-        out.push(ModelCase {
+        let refused = ModelCase {
             seed: case_seed,
             kind,
             partial,
             noise,
             outliers,
-            chosen,
-            model_right,
-            success: model_right && within,
-            chamfer,
-            margin: report.model.bic.and_then(|b| b.margin).unwrap_or(f64::NAN),
-            t_total_ms: report.timing_ms.total,
+            chosen: None,
+            model_right: false,
+            success: false,
+            chamfer: f64::NAN,
+            margin: f64::NAN,
+            t_total_ms: f64::NAN,
+        };
+        out.push(match report {
+            None => refused,
+            Some(report) => {
+                let (shape, fitted) = report.fitted;
+                let pose = Pose::new(
+                    back.rotation * fitted.rotation,
+                    back.to_world(fitted.translation),
+                );
+                let chosen = report.model.kind;
+                let model_right = match kind {
+                    Kind::Holed => chosen == Model::Supertoroid,
+                    Kind::Superellipsoid => chosen == Model::Superellipsoid,
+                };
+                let chamfer = relative_chamfer((&case.shape, &case.pose), (&shape, &pose));
+                let within = match kind {
+                    Kind::Holed => compare((&case.shape, &case.pose), (&shape, &pose)).success(),
+                    Kind::Superellipsoid => chamfer < CHAMFER_BOUND,
+                };
+                ModelCase {
+                    chosen: Some(chosen),
+                    model_right,
+                    success: model_right && within,
+                    chamfer,
+                    margin: report.model.bic.and_then(|b| b.margin).unwrap_or(f64::NAN),
+                    t_total_ms: report.timing_ms.total,
+                    ..refused
+                }
+            }
         });
         bar.inc(1);
     }
@@ -122,13 +141,13 @@ impl Report for ModelReport {
         );
         for c in &self.cases {
             s += &format!(
-                "{},{:?},{},{},{},{:?},{},{},{:.5},{:.2},{:.1}\n",
+                "{},{:?},{},{},{},{},{},{},{:.5},{:.2},{:.1}\n",
                 c.seed,
                 c.kind,
                 c.partial,
                 c.noise,
                 c.outliers,
-                c.chosen,
+                c.chosen.map_or("none".to_owned(), |m| format!("{m:?}")),
                 c.model_right,
                 c.success,
                 c.chamfer,
@@ -162,7 +181,12 @@ impl Report for ModelReport {
             let model_right = kept.iter().filter(|c| c.model_right).count();
             let right = kept.iter().filter(|c| c.success).count();
             let [lo, hi] = wilson_interval(right, n);
-            let times: Vec<f64> = kept.iter().map(|c| c.t_total_ms).collect();
+            // (a refused cloud has no fit time)
+            let times: Vec<f64> = kept
+                .iter()
+                .map(|c| c.t_total_ms)
+                .filter(|t| t.is_finite())
+                .collect();
             md += &format!(
                 "| {label}: {n} | {model_right} ({:.1}%) | {right} ({:.1}%) | {:.1}-{:.1}% | {:.0} | {:.0} |\n",
                 100.0 * model_right as f64 / n.max(1) as f64,
