@@ -10,10 +10,10 @@
 use super::synthetic::{Presentation, category, presented, wilson_interval};
 use super::{Report, percentile};
 use crate::eval::{Backend, make_evaluator};
-use crate::fit::{FitOptions, Model, fit};
+use crate::fit::{FitError, FitOptions, FitReport, Model, fit};
 use crate::model::Pose;
 use crate::suite::chamfer::{CHAMFER_BOUND, relative_chamfer};
-use crate::suite::ground_truth::{Kind, compare, make_case_of};
+use crate::suite::ground_truth::{Case, Kind, compare, make_case_of};
 use serde::Serialize;
 
 #[derive(Clone, Debug, Serialize)]
@@ -34,6 +34,26 @@ pub struct ModelCase {
     /// the BIC margin of the choice (NaN where only one model was fitted)
     pub margin: f64,
     pub t_total_ms: f64,
+}
+
+impl ModelCase {
+    /// A case of `kind` in `category` (partial, noise, outliers) with no fit: failed.
+    fn failed(seed: u64, kind: Kind, category: (bool, f64, f64)) -> Self {
+        let (partial, noise, outliers) = category;
+        ModelCase {
+            seed,
+            kind,
+            partial,
+            noise,
+            outliers,
+            chosen: None,
+            model_right: false,
+            success: false,
+            chamfer: f64::NAN,
+            margin: f64::NAN,
+            t_total_ms: f64::NAN,
+        }
+    }
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -72,54 +92,9 @@ pub fn run(
             viewpoint,
             ..base.clone()
         };
-        let report = match fit(evaluator.as_mut(), &points, &options) {
-            Ok(report) => Some(report),
-            // a true object refused by the object screen is a failed case, not a stop
-            Err(crate::fit::FitError::NoObject(_)) => None,
-            Err(e) => return Err(format!("case {case_seed}: {e}")),
-        };
-        let refused = ModelCase {
-            seed: case_seed,
-            kind,
-            partial,
-            noise,
-            outliers,
-            chosen: None,
-            model_right: false,
-            success: false,
-            chamfer: f64::NAN,
-            margin: f64::NAN,
-            t_total_ms: f64::NAN,
-        };
-        out.push(match report {
-            None => refused,
-            Some(report) => {
-                let (shape, fitted) = report.fitted;
-                let pose = Pose::new(
-                    back.rotation * fitted.rotation,
-                    back.to_world(fitted.translation),
-                );
-                let chosen = report.model.kind;
-                let model_right = match kind {
-                    Kind::Holed => chosen == Model::Supertoroid,
-                    Kind::Superellipsoid => chosen == Model::Superellipsoid,
-                };
-                let chamfer = relative_chamfer((&case.shape, &case.pose), (&shape, &pose));
-                let within = match kind {
-                    Kind::Holed => compare((&case.shape, &case.pose), (&shape, &pose)).success(),
-                    Kind::Superellipsoid => chamfer < CHAMFER_BOUND,
-                };
-                ModelCase {
-                    chosen: Some(chosen),
-                    model_right,
-                    success: model_right && within,
-                    chamfer,
-                    margin: report.model.bic.and_then(|b| b.margin).unwrap_or(f64::NAN),
-                    t_total_ms: report.timing_ms.total,
-                    ..refused
-                }
-            }
-        });
+        let refused = ModelCase::failed(case_seed, kind, (partial, noise, outliers));
+        let fitted = fit(evaluator.as_mut(), &points, &options);
+        out.push(judged(refused, &case, &back, fitted)?);
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -127,6 +102,47 @@ pub fn run(
         machine: super::Machine::probe(),
         model: base.model,
         cases: out,
+    })
+}
+
+/// A case judged from its fit (`back` takes the fit from the camera's frame to the
+/// case's): `refused` (the case's description, failed) with the fit's model, rule and
+/// time filled in. A true object refused by the object screen is that failed case, not a
+/// stop; any other error stops the run.
+fn judged(
+    refused: ModelCase,
+    case: &Case,
+    back: &Pose,
+    fitted: Result<FitReport, FitError>,
+) -> Result<ModelCase, String> {
+    let report = match fitted {
+        Ok(report) => report,
+        Err(FitError::NoObject(_)) => return Ok(refused),
+        Err(e) => return Err(format!("case {}: {e}", refused.seed)),
+    };
+    let (shape, fitted) = report.fitted;
+    let pose = Pose::new(
+        back.rotation * fitted.rotation,
+        back.to_world(fitted.translation),
+    );
+    let chosen = report.model.kind;
+    let model_right = match refused.kind {
+        Kind::Holed => chosen == Model::Supertoroid,
+        Kind::Superellipsoid => chosen == Model::Superellipsoid,
+    };
+    let chamfer = relative_chamfer((&case.shape, &case.pose), (&shape, &pose));
+    let within = match refused.kind {
+        Kind::Holed => compare((&case.shape, &case.pose), (&shape, &pose)).success(),
+        Kind::Superellipsoid => chamfer < CHAMFER_BOUND,
+    };
+    Ok(ModelCase {
+        chosen: Some(chosen),
+        model_right,
+        success: model_right && within,
+        chamfer,
+        margin: report.model.bic.and_then(|b| b.margin).unwrap_or(f64::NAN),
+        t_total_ms: report.timing_ms.total,
+        ..refused
     })
 }
 
@@ -198,5 +214,37 @@ impl Report for ModelReport {
             );
         }
         md
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_refused_cloud_is_a_failed_case_and_other_errors_stop_the_run() {
+        let case = make_case_of(Kind::Superellipsoid, 7, true, 0.01, 0.0);
+        let refused = ModelCase::failed(7, Kind::Superellipsoid, (true, 0.01, 0.0));
+        let back = Pose::new(glam::DQuat::IDENTITY, glam::DVec3::ZERO);
+        let judged_refusal = judged(
+            refused.clone(),
+            &case,
+            &back,
+            Err(FitError::NoObject("a bare plane".into())),
+        )
+        .expect("a refusal is a case");
+        assert!(judged_refusal.chosen.is_none() && !judged_refusal.success);
+        let report = ModelReport {
+            machine: crate::bench::Machine::probe(),
+            model: Model::Auto,
+            cases: vec![judged_refusal],
+        };
+        assert!(
+            report.csv().contains(",none,false,false,"),
+            "{}",
+            report.csv()
+        );
+        let stopped = judged(refused, &case, &back, Err(FitError::TooFewPoints(3)));
+        assert!(stopped.is_err_and(|e| e.starts_with("case 7:")));
     }
 }
