@@ -207,13 +207,13 @@ fn robust_scale(residuals: &[f64]) -> f64 {
 
 /// The likelihood of each solution on its cloud's sample: (candidate, scale, score), the
 /// scale from its residuals on the evaluator's current point set of its cloud, whose
-/// surface holds `uploaded[set]` points.
+/// surface holds `uploaded(cloud)` points.
 fn scored(
     evaluator: &mut dyn Evaluator,
     solutions: &[Solution],
     sets: &[usize],
     samples: &[&Sample],
-    uploaded: &[usize],
+    uploaded: fn(&Prepared) -> usize,
     group: &[(usize, Prepared)],
 ) -> Result<Vec<Scored>, FitError> {
     let candidates: Vec<Candidate> = solutions.iter().map(|s| s.candidate).collect();
@@ -223,7 +223,7 @@ fn scored(
     for (solution, &set) in solutions.iter().zip(sets) {
         // (a candidate's residuals are as many as its set's points on the evaluator,
         // whatever sample it is scored on)
-        let n = uploaded[set];
+        let n = uploaded(&group[set].1);
         let sigma = robust_scale(&residuals[offset..offset + n]);
         offset += n;
         out.push(Scored {
@@ -314,13 +314,12 @@ pub(super) fn search_group(
         .collect();
     let (live, live_sets): (Vec<Solution>, Vec<usize>) = live.into_iter().unzip();
     let sample_refs: Vec<&Sample> = samples1.iter().collect();
-    let uploaded1: Vec<usize> = group.iter().map(|(_, p)| p.stage1_pts.len()).collect();
     let scored1 = scored(
         evaluator,
         &live,
         &live_sets,
         &sample_refs,
-        &uploaded1,
+        |p| p.stage1_pts.len(),
         group,
     )?;
     let stage1_iterations: Vec<usize> = (0..group.len())
@@ -467,13 +466,12 @@ pub(super) fn search_group(
             .collect();
         let solutions = solve_on(evaluator, &candidates, &sets, &boxes, &opts2)?;
         let sample_refs: Vec<&Sample> = mids.iter().collect();
-        let uploaded2: Vec<usize> = group.iter().map(|(_, p)| p.stage2_pts.len()).collect();
         let scored2 = scored(
             evaluator,
             &solutions,
             &sets,
             &sample_refs,
-            &uploaded2,
+            |p| p.stage2_pts.len(),
             group,
         )?;
         for &cloud in &precise {
