@@ -167,6 +167,23 @@ fn merit(cost: f64, count: u64, shape: &Shape, b: &Bounds, mu: f64, o: &SolverOp
     cost + prior * count as f64 + barrier(shape, b, mu)
 }
 
+/// A parameter whose curvature (its diagonal of JᵀJ) is below this share of the largest
+/// is one the points do not see: a symmetry of the candidate, such as a round top view
+/// turned about its hole axis (every start with a1 = a2 and eps2 = 1). Its gradient is
+/// then rounding, and rounding over rounding is any step: the GPU evaluator's f32 sums
+/// turned such starts by up to 4.5e4 radians where the CPU's f64 turned them by 4e-3,
+/// and the two backends' fits went to different basins. Rounding puts those curvatures at
+/// 1e-30 (f64) to 1e-15 (f32) of the largest; a top view 1% off round has one of order
+/// (1%)², 1e-4.
+const UNSEEN_CURVATURE: f64 = 1e-8;
+
+/// The parameters the points do not see ([`UNSEEN_CURVATURE`]): they take no step in this
+/// iteration, as held ones, and move again once the others break the symmetry.
+fn unseen_directions(jtj: &[[f64; NUM_PARAMS]; NUM_PARAMS]) -> [bool; NUM_PARAMS] {
+    let largest = (0..NUM_PARAMS).map(|k| jtj[k][k]).fold(0.0, f64::max);
+    std::array::from_fn(|k| jtj[k][k] < UNSEEN_CURVATURE * largest)
+}
+
 /// Applies a parameter step: shape and translation additively, rotation on the manifold.
 pub fn apply_step(c: &Candidate, step: &[f64; NUM_PARAMS]) -> Candidate {
     let mut shape = c.shape.to_array();
@@ -296,6 +313,7 @@ pub fn solve_on(
             let bounds = s.bounds;
             s.iterations += 1;
             let mut h = Mat12::from_fn(|a, b| ne.jtj[a][b]);
+            let unseen = unseen_directions(&ne.jtj);
             let mut g = Vec12::from_fn(|a, _| ne.jtr[a]);
             for k in 0..6 {
                 g[k] += o.shape_prior[k] * ne.count as f64;
@@ -307,7 +325,7 @@ pub fn solve_on(
                 h[(k, k)] += s.z_lower[k] / dl + s.z_upper[k] / du;
             }
             for k in 0..NUM_PARAMS {
-                if o.fixed[k] {
+                if o.fixed[k] || unseen[k] {
                     g[k] = 0.0;
                     for j in 0..NUM_PARAMS {
                         h[(k, j)] = 0.0;
