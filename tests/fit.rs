@@ -504,7 +504,7 @@ fn the_pots_runs_grade_alike_on_both_backends() {
         .join("../shared/clouds/paper/pot2clean.pcd");
     let points = supertoroid::io::read_cloud(&path, None)
         .expect("the paper's clouds live in ../shared/clouds/paper");
-    let runs = |evaluator: &mut dyn supertoroid::eval::Evaluator| -> Vec<FitReport> {
+    let runs = |evaluator: &mut dyn Evaluator| -> Vec<FitReport> {
         (0..10)
             .map(|seed| {
                 let o = FitOptions {
