@@ -1704,7 +1704,7 @@ fn auto_tells_rings_from_boxes_and_cans_on_single_views() {
 /// (the suite's ranges, tall rolls, thin washers, oval rings) through the D435-like
 /// sensor, half with outliers over the scene's box, fitted with no options in the
 /// camera's frame. `examples/broad_views` runs the full benchmark, where the fit gets
-/// about two views in three (156 of 240 on seeds 2000000, 2100000 and 2500000); twelve
+/// about two views in three (seeds 2000000, 2100000 and 2500000); twelve
 /// views of it gave 6 to 8 as the solver's basin choices moved, so half is asked: a fall
 /// below it is a regression, not chance.
 #[test]
