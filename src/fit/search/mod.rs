@@ -385,16 +385,12 @@ pub(super) fn search_group(
         }
     }
     let mut dropped = vec![false; group.len()];
-    for &(a, b) in twins {
-        let (Some(best_a), Some(best_b)) = (kept1[a].first(), kept1[b].first()) else {
-            continue;
-        };
-        if best_a.score + ROUND1_TWIN_MARGIN < best_b.score {
-            dropped[b] = true;
-        } else if best_b.score + ROUND1_TWIN_MARGIN < best_a.score {
-            dropped[a] = true;
-        }
-    }
+    drop_less_likely_readings(
+        twins,
+        |cloud| kept1[cloud].first().map(|c| c.score),
+        ROUND1_TWIN_MARGIN,
+        &mut dropped,
+    );
     let sample = |p: &Prepared, points: &[DVec3], cloud: usize| {
         Sample::new(points, p.viewpoint, all_round[cloud])
     };
@@ -543,16 +539,12 @@ pub(super) fn search_group(
     // Twins (one cloud read as a view and as a view from nowhere): the reading whose best
     // candidate is plainly less likely than the other's goes no further.
     let best2: Vec<Scored> = round2.iter().map(|r| choose(r)).collect();
-    for &(a, b) in twins {
-        if dropped[a] || dropped[b] {
-            continue;
-        }
-        if best2[a].score + TWIN_MARGIN < best2[b].score {
-            dropped[b] = true;
-        } else if best2[b].score + TWIN_MARGIN < best2[a].score {
-            dropped[a] = true;
-        }
-    }
+    drop_less_likely_readings(
+        twins,
+        |cloud| Some(best2[cloud].score),
+        TWIN_MARGIN,
+        &mut dropped,
+    );
 
     // The most likely candidate converges on the stage-2 sample (the polish then takes it
     // on more of the cloud's points).
@@ -592,6 +584,30 @@ pub(super) fn search_group(
         f.finalists_ms = (t3 - t2).as_secs_f64() * 1e3;
     }
     Ok(found)
+}
+
+/// Of each pair of twins (one cloud's two readings) not yet decided, the reading whose
+/// best score (negative mean log-likelihood, `best(cloud)`) is behind the other's by more
+/// than `margin` is dropped.
+fn drop_less_likely_readings(
+    twins: &[(usize, usize)],
+    best: impl Fn(usize) -> Option<f64>,
+    margin: f64,
+    dropped: &mut [bool],
+) {
+    for &(a, b) in twins {
+        if dropped[a] || dropped[b] {
+            continue;
+        }
+        let (Some(score_a), Some(score_b)) = (best(a), best(b)) else {
+            continue;
+        };
+        if score_a + margin < score_b {
+            dropped[b] = true;
+        } else if score_b + margin < score_a {
+            dropped[a] = true;
+        }
+    }
 }
 
 /// The most likely of a cloud's refined finalists.
