@@ -26,6 +26,7 @@
 
 pub(super) mod batch;
 pub mod polish;
+mod rounds;
 
 use super::*;
 use crate::eval::Normalization;
@@ -276,269 +277,30 @@ pub(super) struct Found {
     pub dropped: bool,
 }
 
-/// The search for every cloud of a group (clouds with one solver setting).
+/// The search for every cloud of a group (clouds with one solver setting): round 1,
+/// the twin cut after it, round 2, the twin cut after it, the finalists.
 pub(super) fn search_group(
     evaluator: &mut dyn Evaluator,
     group: &[(usize, Prepared)],
     twins: &[(usize, usize)],
 ) -> Result<Vec<Found>, FitError> {
     let t0 = Instant::now();
-    let (opts1, opts2) = (group[0].1.opts1, group[0].1.opts2);
-    let bounds = group[0].1.bounds;
-    // (the reading from nowhere of a cloud searched as a view too is all round by its
-    // own premise: the likelihood tells the two readings apart)
-    let nowhere_twin: Vec<bool> = (0..group.len())
-        .map(|c| twins.iter().any(|&(_, b)| b == c))
-        .collect();
-    let samples1: Vec<Sample> = group
-        .iter()
-        .map(|(_, p)| Sample::new(&p.stage1_pts, p.viewpoint, true))
-        .collect();
-
-    // Round 1: every start on the stage-1 sample.
-    let sets1: Vec<PointSet> = group.iter().map(|(_, p)| p.stage1_set()).collect();
-    evaluator.set_point_sets_with_free_space(&sets1)?;
-    let (starts, sets) = flatten(group.iter().map(|(_, p)| p.starts.clone()));
-    // (no pruning by cost: the likelihood does the cutting)
-    let round1_options = SolverOptions {
-        max_iterations: ROUND1_ITERATIONS,
-        prune_after: 0,
-        ..opts1
-    };
-    let round1 = solve_on(
-        evaluator,
-        &starts,
-        &sets,
-        &vec![bounds; starts.len()],
-        &round1_options,
-    )?;
-    // (a start merged into another reports that one's solution: one of them is enough)
-    let live: Vec<(Solution, usize)> = round1
-        .into_iter()
-        .zip(sets)
-        .filter(|(s, _)| !matches!(s.stop, Stop::Merged | Stop::Pruned))
-        .collect();
-    let (live, live_sets): (Vec<Solution>, Vec<usize>) = live.into_iter().unzip();
-    let sample_refs: Vec<&Sample> = samples1.iter().collect();
-    let scored1 = scored(
-        evaluator,
-        &live,
-        &live_sets,
-        &sample_refs,
-        |p| p.stage1_pts.len(),
-        group,
-    )?;
-    let stage1_iterations: Vec<usize> = (0..group.len())
-        .map(|cloud| {
-            of_cloud(&live, &live_sets, cloud)
-                .map(|s| s.iterations)
-                .max()
-                .unwrap_or(0)
-        })
-        .collect();
-    // A cloud from nowhere (and no view's twin) is all round its object where its points
-    // cover the surface of the likeliest candidate read so; otherwise no reading but its
-    // points' distances holds, and its candidates are ranked by those.
-    let from_nowhere: Vec<bool> = group
-        .iter()
-        .enumerate()
-        .map(|(cloud, (_, p))| p.viewpoint.is_none() && !nowhere_twin[cloud])
-        .collect();
-    // (the same candidates at the same residual scales, scored by their distances alone)
-    let by_distances: Vec<Scored> = if from_nowhere.contains(&true) {
-        let samples: Vec<Sample> = group
-            .iter()
-            .map(|(_, p)| Sample::new(&p.stage1_pts, None, false))
-            .collect();
-        scored1
-            .iter()
-            .zip(&live_sets)
-            .map(|(c, &set)| Scored {
-                score: samples[set].score(&c.candidate, c.sigma),
-                ..*c
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
-    let covers = |p: &Prepared, best: &Scored| {
-        likelihood::surface_coverage(
-            &p.stage2_pts,
-            &best.candidate,
-            best.sigma.max(REFINE_SIGMA_FLOOR),
-        ) >= LIKELIHOOD_MIN_COVERAGE
-    };
-    let mut all_round = vec![false; group.len()];
-    let mut kept1: Vec<Vec<Scored>> = Vec::with_capacity(group.len());
-    for (cloud, (_, p)) in group.iter().enumerate() {
-        let own = of_cloud(&scored1, &live_sets, cloud).copied().collect();
-        let likeliest = most_likely_distinct(own, ROUND1_KEPT);
-        all_round[cloud] = p.viewpoint.is_none()
-            && (nowhere_twin[cloud] || likeliest.first().is_some_and(|b| covers(p, b)));
-        if from_nowhere[cloud] && !all_round[cloud] {
-            let own = of_cloud(&by_distances, &live_sets, cloud)
-                .copied()
-                .collect();
-            kept1.push(most_likely_distinct(own, ROUND1_KEPT));
-        } else {
-            kept1.push(likeliest);
-        }
-    }
-    let mut dropped = vec![false; group.len()];
+    let mut first = rounds::round1(evaluator, group, twins)?;
     drop_less_likely_readings(
         twins,
-        |cloud| kept1[cloud].first().map(|c| c.score),
+        |cloud| first.kept[cloud].first().map(|c| c.score),
         ROUND1_TWIN_MARGIN,
-        &mut dropped,
+        &mut first.dropped,
     );
-    let sample = |p: &Prepared, points: &[DVec3], cloud: usize| {
-        Sample::new(points, p.viewpoint, all_round[cloud])
-    };
-    let samples2: Vec<Sample> = group
-        .iter()
-        .enumerate()
-        .map(|(cloud, (_, p))| sample(p, &p.stage2_pts, cloud))
-        .collect();
     let t1 = t0.elapsed();
 
-    // Round 2: the kept candidates, and the other reading of the best one's top view,
-    // refined by the estimator the cloud's noise calls for (one estimator for all of a
-    // cloud's candidates, chosen on its likeliest one: candidates are compared by one
-    // measure).
-    let sets2: Vec<PointSet> = group.iter().map(|(_, p)| p.stage2_set()).collect();
-    evaluator.set_point_sets_with_free_space(&sets2)?;
-    let mids: Vec<Sample> = group
-        .iter()
-        .enumerate()
-        .map(|(cloud, (_, p))| {
-            let mid: Vec<DVec3> = p
-                .stage2_pts
-                .iter()
-                .step_by(p.stage2_pts.len().div_ceil(ROUND2_POINTS).max(1))
-                .copied()
-                .collect();
-            sample(p, &mid, cloud)
-        })
-        .collect();
-    // The likeliest start straight into the robust rounds of least squares: its residual
-    // scale, converged, is the noise the cloud shows that candidate (ten iterations in,
-    // it still reads a precise cloud's outliers and distance as noise), and on a precise
-    // cloud it is a finalist (outliers pull the Huber fit of a precise view into other
-    // basins often enough).
-    let mut direct: Vec<Option<Scored>> = Vec::with_capacity(group.len());
-    for (cloud, (_, p)) in group.iter().enumerate() {
-        direct.push(match kept1[cloud].first() {
-            Some(first) if !dropped[cloud] => Some(robust_candidate(
-                evaluator,
-                p,
-                &mids[cloud],
-                cloud,
-                *first,
-                ROUND1_SHORTFALL,
-            )?),
-            _ => None,
-        });
-    }
-    let noise: Vec<Option<f64>> = group
-        .iter()
-        .zip(&direct)
-        .map(|((_, p), direct)| {
-            let best = direct.as_ref()?;
-            // (the cloud's own scatter, or the fit's residuals where those are the smaller:
-            // the scatter reads a precise thin ring's curvature as noise)
-            let noise = p.scatter().map_or(best.sigma, |s| s.min(best.sigma));
-            noisy(p, &best.candidate, noise).then_some(noise)
-        })
-        .collect();
-    // precise clouds: least squares on the stage-2 sample, every candidate in one batch,
-    // then the robust rounds for the two likeliest in distinct basins
-    let precise: Vec<usize> = (0..group.len())
-        .filter(|&c| noise[c].is_none() && !dropped[c])
-        .collect();
-    let mut round2: Vec<Vec<Scored>> = kept1.clone();
-    if !precise.is_empty() {
-        let mut candidates = Vec::new();
-        let mut sets = Vec::new();
-        for &cloud in &precise {
-            let p = &group[cloud].1;
-            let kept = &kept1[cloud];
-            let dual = kept
-                .first()
-                .filter(|_| !p.skip.contains(&Stage::DualReading))
-                .and_then(|best| p.turned_dual(&best.candidate));
-            for c in kept.iter().map(|k| k.candidate).chain(dual) {
-                candidates.push(c);
-                sets.push(cloud);
-            }
-        }
-        let boxes: Vec<Bounds> = candidates
-            .iter()
-            .zip(&sets)
-            .map(|(c, &cloud)| group[cloud].1.supported_bounds(c))
-            .collect();
-        let solutions = solve_on(evaluator, &candidates, &sets, &boxes, &opts2)?;
-        let sample_refs: Vec<&Sample> = mids.iter().collect();
-        let scored2 = scored(
-            evaluator,
-            &solutions,
-            &sets,
-            &sample_refs,
-            |p| p.stage2_pts.len(),
-            group,
-        )?;
-        for &cloud in &precise {
-            let p = &group[cloud].1;
-            let own = of_cloud(&scored2, &sets, cloud).copied().collect();
-            let mut refined = Vec::new();
-            for c in most_likely_distinct(own, 2) {
-                refined.push(robust_candidate(evaluator, p, &mids[cloud], cloud, c, 0)?);
-            }
-            refined.extend(direct[cloud]);
-            round2[cloud] = refined;
-        }
-    }
-    for (cloud, (_, p)) in group.iter().enumerate() {
-        let Some(noise) = noise[cloud].filter(|_| !dropped[cloud]) else {
-            continue;
-        };
-        let mut refined = Vec::with_capacity(kept1[cloud].len() + 1);
-        for c in &kept1[cloud] {
-            // (a candidate whose likelihood collapses converges by robust least squares
-            // instead: left as round 1 left it, ten iterations in, it could still stand)
-            let r = match likelihood_candidate(p, &mids[cloud], *c, noise) {
-                Some(r) => r,
-                None => robust_candidate(evaluator, p, &mids[cloud], cloud, *c, ROUND1_SHORTFALL)?,
-            };
-            refined.push(r);
-        }
-        // the other reading of the likeliest one's top view (least squares cannot tell
-        // the two apart: the likelihood can, given the points), after least squares in
-        // its own basin
-        let best = choose(&refined);
-        if let Some(dual) = p
-            .turned_dual(&best.candidate)
-            .filter(|_| !p.skip.contains(&Stage::DualReading))
-        {
-            let dual = robust_candidate(
-                evaluator,
-                p,
-                &mids[cloud],
-                cloud,
-                Scored {
-                    candidate: dual,
-                    ..best
-                },
-                ROUND1_SHORTFALL,
-            )?;
-            refined.push(likelihood_candidate(p, &mids[cloud], dual, noise).unwrap_or(dual));
-        }
-        round2[cloud] = refined;
-    }
+    let round2 = rounds::round2(evaluator, group, &first)?;
     let t2 = t0.elapsed();
 
     // Twins (one cloud read as a view and as a view from nowhere): the reading whose best
     // candidate is plainly less likely than the other's goes no further.
     let best2: Vec<Scored> = round2.iter().map(|r| choose(r)).collect();
+    let mut dropped = first.dropped;
     drop_less_likely_readings(
         twins,
         |cloud| Some(best2[cloud].score),
@@ -546,44 +308,21 @@ pub(super) fn search_group(
         &mut dropped,
     );
 
-    // The most likely candidate converges on the stage-2 sample (the polish then takes it
-    // on more of the cloud's points).
-    let mut found = Vec::with_capacity(group.len());
-    for (cloud, (_, p)) in group.iter().enumerate() {
-        let mut best = best2[cloud];
-        if best.modelled && !dropped[cloud] {
-            // (a runner-up about as likely on the round-2 sample converges too, and the
-            // likelier of the two on the stage-2 sample stands: the two readings of a
-            // top view are often that close)
-            let close: Vec<Scored> = round2[cloud]
-                .iter()
-                .filter(|c| c.modelled && c.score <= best.score + CLOSE_MARGIN)
-                .copied()
-                .collect();
-            let close = most_likely_distinct(close, 2);
-            let mut converged: Vec<Scored> = close
-                .into_iter()
-                .map(|c| converge(p, &samples2[cloud], c, REFINE_ITERATIONS))
-                .collect();
-            converged.sort_by(|a, b| a.rank(b));
-            if let Some(first) = converged.first() {
-                best = *first;
-            }
-        }
-        found.push(Found {
-            best,
-            stage1_iterations: stage1_iterations[cloud],
-            round1_ms: t1.as_secs_f64() * 1e3,
-            round2_ms: (t2 - t1).as_secs_f64() * 1e3,
-            finalists_ms: 0.0,
-            dropped: dropped[cloud],
-        });
-    }
+    let best = rounds::finalists(group, &round2, &best2, &first.all_round, &dropped);
     let t3 = t0.elapsed();
-    for f in &mut found {
-        f.finalists_ms = (t3 - t2).as_secs_f64() * 1e3;
-    }
-    Ok(found)
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    Ok(best
+        .into_iter()
+        .enumerate()
+        .map(|(cloud, best)| Found {
+            best,
+            stage1_iterations: first.stage1_iterations[cloud],
+            round1_ms: ms(t1),
+            round2_ms: ms(t2 - t1),
+            finalists_ms: ms(t3 - t2),
+            dropped: dropped[cloud],
+        })
+        .collect())
 }
 
 /// Of each pair of twins (one cloud's two readings) not yet decided, the reading whose

@@ -1,0 +1,340 @@
+//! The search's rounds, each a function with a small result: round 1 (every start, a few
+//! least-squares steps, the likeliest in distinct basins kept), round 2 (the kept ones
+//! refined by the estimator the cloud's noise calls for) and the finalists (the likeliest
+//! converged). `search_group` composes them with the twin cuts between.
+
+use super::*;
+
+/// What round 1 leaves for each cloud of a group.
+pub(super) struct Round1 {
+    /// the likeliest candidates in distinct basins, most likely first
+    pub kept: Vec<Vec<Scored>>,
+    /// the cloud (with no viewpoint) covers its object all round
+    pub all_round: Vec<bool>,
+    pub stage1_iterations: Vec<usize>,
+    /// the reading goes no further (its twin's is far more likely)
+    pub dropped: Vec<bool>,
+}
+
+/// Round 1: every start of every cloud on the stage-1 sample, least squares for
+/// [`ROUND1_ITERATIONS`] in one batch, scored by the likelihood; the [`ROUND1_KEPT`]
+/// likeliest in distinct basins go on.
+pub(super) fn round1(
+    evaluator: &mut dyn Evaluator,
+    group: &[(usize, Prepared)],
+    twins: &[(usize, usize)],
+) -> Result<Round1, FitError> {
+    let opts1 = group[0].1.opts1;
+    let bounds = group[0].1.bounds;
+    // (the reading from nowhere of a cloud searched as a view too is all round by its
+    // own premise: the likelihood tells the two readings apart)
+    let nowhere_twin: Vec<bool> = (0..group.len())
+        .map(|c| twins.iter().any(|&(_, b)| b == c))
+        .collect();
+    let samples1: Vec<Sample> = group
+        .iter()
+        .map(|(_, p)| Sample::new(&p.stage1_pts, p.viewpoint, true))
+        .collect();
+    let sets1: Vec<PointSet> = group.iter().map(|(_, p)| p.stage1_set()).collect();
+    evaluator.set_point_sets_with_free_space(&sets1)?;
+    let (starts, sets) = flatten(group.iter().map(|(_, p)| p.starts.clone()));
+    // (no pruning by cost: the likelihood does the cutting)
+    let round1_options = SolverOptions {
+        max_iterations: ROUND1_ITERATIONS,
+        prune_after: 0,
+        ..opts1
+    };
+    let round1 = solve_on(
+        evaluator,
+        &starts,
+        &sets,
+        &vec![bounds; starts.len()],
+        &round1_options,
+    )?;
+    // (a start merged into another reports that one's solution: one of them is enough)
+    let (live, live_sets): (Vec<Solution>, Vec<usize>) = round1
+        .into_iter()
+        .zip(sets)
+        .filter(|(s, _)| !matches!(s.stop, Stop::Merged | Stop::Pruned))
+        .unzip();
+    let sample_refs: Vec<&Sample> = samples1.iter().collect();
+    let scored1 = scored(
+        evaluator,
+        &live,
+        &live_sets,
+        &sample_refs,
+        |p| p.stage1_pts.len(),
+        group,
+    )?;
+    let stage1_iterations: Vec<usize> = (0..group.len())
+        .map(|cloud| {
+            of_cloud(&live, &live_sets, cloud)
+                .map(|s| s.iterations)
+                .max()
+                .unwrap_or(0)
+        })
+        .collect();
+    // A cloud from nowhere (and no view's twin) is all round its object where its points
+    // cover the surface of the likeliest candidate read so; otherwise no reading but its
+    // points' distances holds, and its candidates are ranked by those.
+    let from_nowhere: Vec<bool> = group
+        .iter()
+        .enumerate()
+        .map(|(cloud, (_, p))| p.viewpoint.is_none() && !nowhere_twin[cloud])
+        .collect();
+    // (the same candidates at the same residual scales, scored by their distances alone)
+    let by_distances: Vec<Scored> = if from_nowhere.contains(&true) {
+        let samples: Vec<Sample> = group
+            .iter()
+            .map(|(_, p)| Sample::new(&p.stage1_pts, None, false))
+            .collect();
+        scored1
+            .iter()
+            .zip(&live_sets)
+            .map(|(c, &set)| Scored {
+                score: samples[set].score(&c.candidate, c.sigma),
+                ..*c
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let covers = |p: &Prepared, best: &Scored| {
+        likelihood::surface_coverage(
+            &p.stage2_pts,
+            &best.candidate,
+            best.sigma.max(REFINE_SIGMA_FLOOR),
+        ) >= LIKELIHOOD_MIN_COVERAGE
+    };
+    let mut all_round = vec![false; group.len()];
+    let mut kept: Vec<Vec<Scored>> = Vec::with_capacity(group.len());
+    for (cloud, (_, p)) in group.iter().enumerate() {
+        let own = of_cloud(&scored1, &live_sets, cloud).copied().collect();
+        let likeliest = most_likely_distinct(own, ROUND1_KEPT);
+        all_round[cloud] = p.viewpoint.is_none()
+            && (nowhere_twin[cloud] || likeliest.first().is_some_and(|b| covers(p, b)));
+        if from_nowhere[cloud] && !all_round[cloud] {
+            let own = of_cloud(&by_distances, &live_sets, cloud)
+                .copied()
+                .collect();
+            kept.push(most_likely_distinct(own, ROUND1_KEPT));
+        } else {
+            kept.push(likeliest);
+        }
+    }
+    Ok(Round1 {
+        kept,
+        all_round,
+        stage1_iterations,
+        dropped: vec![false; group.len()],
+    })
+}
+
+/// Each cloud's sample for the likelihood as round 1 read it.
+fn sample_of(p: &Prepared, points: &[DVec3], all_round: bool) -> Sample {
+    Sample::new(points, p.viewpoint, all_round)
+}
+
+/// Round 2: round 1's kept candidates, and the other reading of the best one's top view,
+/// refined by the estimator the cloud's noise calls for (one estimator for all of a
+/// cloud's candidates, chosen on its likeliest one: candidates are compared by one
+/// measure), scored on [`ROUND2_POINTS`] of the stage-2 sample. A dropped reading keeps
+/// round 1's candidates.
+pub(super) fn round2(
+    evaluator: &mut dyn Evaluator,
+    group: &[(usize, Prepared)],
+    first: &Round1,
+) -> Result<Vec<Vec<Scored>>, FitError> {
+    let sets2: Vec<PointSet> = group.iter().map(|(_, p)| p.stage2_set()).collect();
+    evaluator.set_point_sets_with_free_space(&sets2)?;
+    let mids: Vec<Sample> = group
+        .iter()
+        .enumerate()
+        .map(|(cloud, (_, p))| {
+            let mid: Vec<DVec3> = p
+                .stage2_pts
+                .iter()
+                .step_by(p.stage2_pts.len().div_ceil(ROUND2_POINTS).max(1))
+                .copied()
+                .collect();
+            sample_of(p, &mid, first.all_round[cloud])
+        })
+        .collect();
+    // The likeliest start straight into the robust rounds of least squares: its residual
+    // scale, converged, is the noise the cloud shows that candidate (ten iterations in,
+    // it still reads a precise cloud's outliers and distance as noise), and on a precise
+    // cloud it is a finalist (outliers pull the Huber fit of a precise view into other
+    // basins often enough).
+    let mut direct: Vec<Option<Scored>> = Vec::with_capacity(group.len());
+    for (cloud, (_, p)) in group.iter().enumerate() {
+        direct.push(match first.kept[cloud].first() {
+            Some(best) if !first.dropped[cloud] => Some(robust_candidate(
+                evaluator,
+                p,
+                &mids[cloud],
+                cloud,
+                *best,
+                ROUND1_SHORTFALL,
+            )?),
+            _ => None,
+        });
+    }
+    let noise: Vec<Option<f64>> = group
+        .iter()
+        .zip(&direct)
+        .map(|((_, p), direct)| {
+            let best = direct.as_ref()?;
+            // (the cloud's own scatter, or the fit's residuals where those are the smaller:
+            // the scatter reads a precise thin ring's curvature as noise)
+            let noise = p.scatter().map_or(best.sigma, |s| s.min(best.sigma));
+            noisy(p, &best.candidate, noise).then_some(noise)
+        })
+        .collect();
+    let mut round2: Vec<Vec<Scored>> = first.kept.clone();
+    let precise: Vec<usize> = (0..group.len())
+        .filter(|&c| noise[c].is_none() && !first.dropped[c])
+        .collect();
+    if !precise.is_empty() {
+        let refined = refine_precise(evaluator, group, &first.kept, &precise, &mids)?;
+        for (cloud, mut refined) in precise.into_iter().zip(refined) {
+            refined.extend(direct[cloud]);
+            round2[cloud] = refined;
+        }
+    }
+    for (cloud, (_, p)) in group.iter().enumerate() {
+        if let Some(noise) = noise[cloud].filter(|_| !first.dropped[cloud]) {
+            round2[cloud] =
+                refine_noisy(evaluator, p, cloud, &first.kept[cloud], &mids[cloud], noise)?;
+        }
+    }
+    Ok(round2)
+}
+
+/// Round 2 of the `precise` clouds: least squares on the stage-2 sample, every
+/// candidate (and the other reading of each cloud's best top view) in one batch, then the
+/// robust rounds for the two likeliest in distinct basins; one list per precise cloud.
+fn refine_precise(
+    evaluator: &mut dyn Evaluator,
+    group: &[(usize, Prepared)],
+    kept: &[Vec<Scored>],
+    precise: &[usize],
+    mids: &[Sample],
+) -> Result<Vec<Vec<Scored>>, FitError> {
+    let mut candidates = Vec::new();
+    let mut sets = Vec::new();
+    for &cloud in precise {
+        let p = &group[cloud].1;
+        let dual = kept[cloud]
+            .first()
+            .filter(|_| !p.skip.contains(&Stage::DualReading))
+            .and_then(|best| p.turned_dual(&best.candidate));
+        for c in kept[cloud].iter().map(|k| k.candidate).chain(dual) {
+            candidates.push(c);
+            sets.push(cloud);
+        }
+    }
+    let boxes: Vec<Bounds> = candidates
+        .iter()
+        .zip(&sets)
+        .map(|(c, &cloud)| group[cloud].1.supported_bounds(c))
+        .collect();
+    let solutions = solve_on(evaluator, &candidates, &sets, &boxes, &group[0].1.opts2)?;
+    let sample_refs: Vec<&Sample> = mids.iter().collect();
+    let scored2 = scored(
+        evaluator,
+        &solutions,
+        &sets,
+        &sample_refs,
+        |p| p.stage2_pts.len(),
+        group,
+    )?;
+    let mut out = Vec::with_capacity(precise.len());
+    for &cloud in precise {
+        let p = &group[cloud].1;
+        let own = of_cloud(&scored2, &sets, cloud).copied().collect();
+        let mut refined = Vec::new();
+        for c in most_likely_distinct(own, 2) {
+            refined.push(robust_candidate(evaluator, p, &mids[cloud], cloud, c, 0)?);
+        }
+        out.push(refined);
+    }
+    Ok(out)
+}
+
+/// Round 2 of a noisy cloud: each kept candidate refined by the likelihood at `noise`,
+/// then the other reading of the likeliest one's top view (least squares cannot tell the
+/// two apart: the likelihood can, given the points), after least squares in its own
+/// basin.
+fn refine_noisy(
+    evaluator: &mut dyn Evaluator,
+    p: &Prepared,
+    cloud: usize,
+    kept: &[Scored],
+    mid: &Sample,
+    noise: f64,
+) -> Result<Vec<Scored>, FitError> {
+    let mut refined = Vec::with_capacity(kept.len() + 1);
+    for c in kept {
+        // (a candidate whose likelihood collapses converges by robust least squares
+        // instead: left as round 1 left it, ten iterations in, it could still stand)
+        let r = match likelihood_candidate(p, mid, *c, noise) {
+            Some(r) => r,
+            None => robust_candidate(evaluator, p, mid, cloud, *c, ROUND1_SHORTFALL)?,
+        };
+        refined.push(r);
+    }
+    let best = choose(&refined);
+    if let Some(dual) = p
+        .turned_dual(&best.candidate)
+        .filter(|_| !p.skip.contains(&Stage::DualReading))
+    {
+        let dual = robust_candidate(
+            evaluator,
+            p,
+            mid,
+            cloud,
+            Scored {
+                candidate: dual,
+                ..best
+            },
+            ROUND1_SHORTFALL,
+        )?;
+        refined.push(likelihood_candidate(p, mid, dual, noise).unwrap_or(dual));
+    }
+    Ok(refined)
+}
+
+/// Each cloud's fit: its likeliest round-2 candidate, converged on the stage-2 sample
+/// where the likelihood refined it (a runner-up within [`CLOSE_MARGIN`] converges too,
+/// and the likelier of the two stands: the two readings of a top view are often that
+/// close). The polish then takes it on more of the cloud's points.
+pub(super) fn finalists(
+    group: &[(usize, Prepared)],
+    round2: &[Vec<Scored>],
+    best2: &[Scored],
+    all_round: &[bool],
+    dropped: &[bool],
+) -> Vec<Scored> {
+    group
+        .iter()
+        .enumerate()
+        .map(|(cloud, (_, p))| {
+            let best = best2[cloud];
+            if !best.modelled || dropped[cloud] {
+                return best;
+            }
+            let close: Vec<Scored> = round2[cloud]
+                .iter()
+                .filter(|c| c.modelled && c.score <= best.score + CLOSE_MARGIN)
+                .copied()
+                .collect();
+            let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
+            let mut converged: Vec<Scored> = most_likely_distinct(close, 2)
+                .into_iter()
+                .map(|c| converge(p, &sample, c, REFINE_ITERATIONS))
+                .collect();
+            converged.sort_by(|a, b| a.rank(b));
+            converged.first().copied().unwrap_or(best)
+        })
+        .collect()
+}
