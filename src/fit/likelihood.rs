@@ -43,6 +43,7 @@ pub(crate) mod visibility;
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};
 use crate::solve::Bounds;
+use crate::solve::likelihood::{Held, LikelihoodProblem, Matrix, Stopping, Vector, minimise};
 use glam::{DQuat, DVec3};
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
@@ -75,11 +76,10 @@ const GRID_SLACK: f64 = 0.1;
 /// Levenberg-Marquardt iterations at most, by default.
 pub const MAX_ITERATIONS: usize = 30;
 
-/// The parameters of the refinement: shape a1 a2 a3 a4 eps1 eps2, translation, a rotation
-/// vector applied on the left of the starting rotation, ln sigma.
-const N: usize = 13;
-type Vector = SVector<f64, N>;
-type Matrix = SMatrix<f64, N, N>;
+/// The parameters of the refinement ([`crate::solve::likelihood`]'s): shape a1 a2 a3 a4
+/// eps1 eps2, translation, a rotation vector applied on the left of the starting
+/// rotation, ln sigma.
+const N: usize = PARAMETERS;
 
 /// What the caller holds fixed and where the shape may go.
 #[derive(Clone, Copy, Debug)]
@@ -686,119 +686,86 @@ pub fn refine_finely(
 }
 
 fn refine_problem(
-    (mut problem, mut x): (Problem, Vector),
+    (problem, x): (Problem, Vector),
     start: &Candidate,
     sigma: f64,
     limits: &Limits,
     max_iterations: usize,
 ) -> Option<Refined> {
-    let axis = start.pose.axis();
-    // what is held fixed leaves the step: known shape parameters, and with a known axis
-    // every turn but the one about it
-    let mut free = [true; N];
-    for k in 0..6 {
-        free[k] = !limits.fixed_shape[k];
-    }
-    let b = &limits.bounds;
-    let feasible = |x: &Vector| {
-        (0..6).all(|k| x[k] > b.lower[k] && x[k] < b.upper[k])
-            && x[3] > 1.01
-            && x[12] > (1e-3 * sigma).ln()
-            && x[12] < (1e2 * sigma).ln()
+    let mut problem = Bounded {
+        problem,
+        bounds: limits.bounds,
+        sigma,
     };
-    // with a known axis the turn is theta about it: the step is solved in parameters
-    // whose rotation part is theta alone (column 9 of the map is the axis, 10 and 11 empty)
-    let reduction = limits.fixed_axis.then(|| {
-        let mut map = Matrix::identity();
-        for k in 9..12 {
-            map[(k, k)] = 0.0;
-        }
-        for (k, a) in axis.to_array().into_iter().enumerate() {
-            map[(9 + k, 9)] = a;
-        }
-        free[10] = false;
-        free[11] = false;
-        map
-    });
-    let solve_step = |g: &Vector, h: &Matrix, lambda: f64| -> Option<Vector> {
-        match &reduction {
-            Some(map) => {
-                let step = lm_solve(
-                    &(map.transpose() * g),
-                    &(map.transpose() * h * map),
-                    lambda,
-                    &free,
-                )?;
-                Some(map * step)
-            }
-            None => lm_solve(g, h, lambda, &free),
-        }
+    let mut held = [false; N];
+    held[..6].copy_from_slice(&limits.fixed_shape);
+    let held = Held {
+        parameters: held,
+        axis: limits.fixed_axis.then(|| start.pose.axis()),
     };
-    let (mut f, mut g, mut h) = problem.evaluate(&x, true);
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    let mut small_steps = 0;
-    while iterations < max_iterations {
-        iterations += 1;
-        let Some(step) = solve_step(&g, &h, lambda) else {
-            break;
-        };
-        let trial = x + step;
-        let f_trial = if feasible(&trial) {
-            problem.evaluate(&trial, false).0
-        } else {
-            f64::INFINITY
-        };
-        if f_trial < f {
-            let decrease = f - f_trial;
-            x = trial;
-            // the turn folds into the starting rotation (the gradient is the left
-            // perturbation's at zero)
-            problem.rotation0 = problem.rotation(&x).normalize();
-            x[9] = 0.0;
-            x[10] = 0.0;
-            x[11] = 0.0;
-            problem.grid = regrid(
-                problem.grid,
-                grid_for(
-                    &Problem::shape(&x),
-                    x[12].exp(),
-                    problem.section_cell_sigmas,
-                ),
-            );
-            (f, g, h) = problem.evaluate(&x, true);
-            lambda = (lambda / 3.0).max(1e-9);
-            small_steps = if decrease < STOP_DECREASE {
-                small_steps + 1
-            } else {
-                0
-            };
-            if small_steps >= 2 || step.norm() < 1e-6 {
-                break;
-            }
-        } else {
-            lambda *= 4.0;
-            if lambda > 1e6 {
-                break;
-            }
-        }
-    }
+    let stopping = Stopping {
+        max_iterations,
+        decrease: STOP_DECREASE,
+        step: 1e-6,
+    };
+    let minimum = minimise(&mut problem, x, &held, &stopping);
+    let x = minimum.x;
     let shape = Shape::new(x[0], x[1], x[2], x[3], x[4], x[5]);
     let pose = Pose::new(
-        problem.rotation(&x).normalize(),
+        problem.problem.rotation(&x).normalize(),
         DVec3::new(x[6], x[7], x[8]),
     );
     Some(Refined {
         candidate: Candidate { shape, pose },
         sigma: x[12].exp(),
-        iterations,
-        objective: f,
+        iterations: minimum.iterations,
+        objective: minimum.value,
     })
 }
 
-/// The number of the model's parameters: shape a1 a2 a3 a4 eps1 eps2, translation, a
-/// rotation vector applied on the left of the candidate's rotation (world frame), ln sigma.
-pub const PARAMETERS: usize = N;
+/// The problem within the shape's box (a4 > 1.01: the model needs its hole, sigma
+/// within 1e-3 and 1e2 of the start's): a step outside is rejected.
+struct Bounded<'a> {
+    problem: Problem<'a>,
+    bounds: Bounds,
+    sigma: f64,
+}
+
+impl LikelihoodProblem for Bounded<'_> {
+    fn evaluate(&self, x: &Vector, with_gradient: bool) -> (f64, Vector, Matrix) {
+        self.problem.evaluate(x, with_gradient)
+    }
+
+    fn admit(&self, x: Vector) -> Option<Vector> {
+        let b = &self.bounds;
+        let feasible = (0..6).all(|k| x[k] > b.lower[k] && x[k] < b.upper[k])
+            && x[3] > 1.01
+            && x[12] > (1e-3 * self.sigma).ln()
+            && x[12] < (1e2 * self.sigma).ln();
+        feasible.then_some(x)
+    }
+
+    fn accept(&mut self, mut x: Vector) -> Vector {
+        // the turn folds into the starting rotation (the gradient is the left
+        // perturbation's at zero)
+        let problem = &mut self.problem;
+        problem.rotation0 = problem.rotation(&x).normalize();
+        x[9] = 0.0;
+        x[10] = 0.0;
+        x[11] = 0.0;
+        problem.grid = regrid(
+            problem.grid,
+            grid_for(
+                &Problem::shape(&x),
+                x[12].exp(),
+                problem.section_cell_sigmas,
+            ),
+        );
+        x
+    }
+}
+
+pub use crate::solve::likelihood::PARAMETERS;
 
 /// The kernel's cutoff for [`scores`], in sigmas: far enough that the kernel is the
 /// Gaussian itself (e^-18 at the cutoff). The fit's [`CUTOFF`] makes a lighter-tailed
@@ -866,26 +833,6 @@ pub struct Scores {
     pub mean: SVector<f64, N>,
     /// the mean outer product of the scores: the Fisher information per point
     pub information: SMatrix<f64, N, N>,
-}
-
-/// (H + lambda diag H) step = -g over the free parameters (the others do not move).
-fn lm_solve(g: &Vector, h: &Matrix, lambda: f64, free: &[bool; N]) -> Option<Vector> {
-    let mut a = *h;
-    let mut b = -*g;
-    for k in 0..N {
-        if free[k] {
-            a[(k, k)] += lambda * h[(k, k)].max(1e-12);
-        } else {
-            for j in 0..N {
-                a[(k, j)] = 0.0;
-                a[(j, k)] = 0.0;
-            }
-            a[(k, k)] = 1.0;
-            b[k] = 0.0;
-        }
-    }
-    let step = a.cholesky()?.solve(&b);
-    step.iter().all(|v| v.is_finite()).then_some(step)
 }
 
 #[cfg(test)]

@@ -37,16 +37,13 @@ pub use refine::{Limits, Refined, STOP_DECREASE, refine, refine_on, value, value
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};
 use glam::{DQuat, DVec3};
-use nalgebra::{SMatrix, SVector};
 use normaliser::Normaliser;
 use rayon::prelude::*;
 use std::f64::consts::TAU;
 use tables::{Grid, SectionTable, SweepTable};
 
-/// The number of the model's parameters (see the module docs).
-pub const PARAMETERS: usize = 13;
-pub type Vector = SVector<f64, PARAMETERS>;
-pub type Matrix = SMatrix<f64, PARAMETERS, PARAMETERS>;
+/// The model's parameters (see the module docs) as the likelihood's solver takes them.
+pub use crate::solve::likelihood::{Matrix, PARAMETERS, Vector};
 
 /// Points meet the surface within this many sigmas; the kernel is shifted down by its
 /// value there so that it reaches zero continuously.

@@ -1,0 +1,257 @@
+//! Levenberg-Marquardt for a likelihood: the fit's two noise models (the objective's
+//! quadrature and the polish's surface grid) maximise theirs with this one loop. The
+//! Hessian is the BHHH outer product of the points' scores (the Fisher information near
+//! the optimum), so a problem gives its value, gradient and that product; the loop damps,
+//! projects, accepts and stops.
+//!
+//! Parameters (13): shape a1 a2 a3 a4 eps1 eps2, translation, a turn (rotation vector on
+//! the left of the problem's reference rotation, world frame), ln sigma. After each
+//! accepted step the problem folds the turn into its reference ([`LikelihoodProblem::accept`]),
+//! so the turn starts from zero every iteration, as in the least-squares solver.
+
+use glam::DVec3;
+use nalgebra::{SMatrix, SVector};
+
+/// The number of parameters (see the module docs).
+pub const PARAMETERS: usize = 13;
+pub type Vector = SVector<f64, PARAMETERS>;
+pub type Matrix = SMatrix<f64, PARAMETERS, PARAMETERS>;
+
+/// A negative mean log-likelihood the loop minimises.
+pub trait LikelihoodProblem {
+    /// The value at `x`; with `with_gradient` also its gradient and the BHHH Hessian.
+    fn evaluate(&self, x: &Vector, with_gradient: bool) -> (f64, Vector, Matrix);
+    /// Where a trial point may go: `x` moved into the feasible set, or None where it is
+    /// rejected outright.
+    fn admit(&self, x: Vector) -> Option<Vector>;
+    /// Takes the accepted point `x` as the new reference (the turn folded into the
+    /// rotation, the quadrature regridded) and returns it in the new reference's terms.
+    fn accept(&mut self, x: Vector) -> Vector;
+}
+
+/// When the loop stops.
+#[derive(Clone, Copy, Debug)]
+pub struct Stopping {
+    pub max_iterations: usize,
+    /// two accepted steps in a row that lower the value by less than this
+    pub decrease: f64,
+    /// an accepted step shorter than this
+    pub step: f64,
+}
+
+/// What the loop held fixed.
+#[derive(Clone, Copy, Debug)]
+pub struct Held {
+    /// parameters that take no step (the caller's known dimensions)
+    pub parameters: [bool; PARAMETERS],
+    /// the hole axis is known (world frame): the turn is about it alone
+    pub axis: Option<DVec3>,
+}
+
+/// The minimum found: the parameters (in the problem's last reference), the value there
+/// and the iterations taken.
+#[derive(Clone, Copy, Debug)]
+pub struct Minimum {
+    pub x: Vector,
+    pub value: f64,
+    pub iterations: usize,
+}
+
+/// Minimises `problem` from `x` by Levenberg-Marquardt (damping 1e-3 at the start, /3
+/// after an accepted step, x4 after a rejected one, stopping above 1e6).
+pub fn minimise(
+    problem: &mut impl LikelihoodProblem,
+    mut x: Vector,
+    held: &Held,
+    stopping: &Stopping,
+) -> Minimum {
+    let mut free = held.parameters.map(|h| !h);
+    // with a known axis the step is solved in parameters whose turn is theta about it
+    // alone (column 9 of the map is the axis, 10 and 11 empty)
+    let reduction = held.axis.map(|axis| {
+        let mut map = Matrix::identity();
+        for k in 9..12 {
+            map[(k, k)] = 0.0;
+        }
+        for (k, a) in axis.to_array().into_iter().enumerate() {
+            map[(9 + k, 9)] = a;
+        }
+        free[10] = false;
+        free[11] = false;
+        map
+    });
+    let solve_step = |g: &Vector, h: &Matrix, lambda: f64| -> Option<Vector> {
+        match &reduction {
+            Some(map) => {
+                let step = damped_step(
+                    &(map.transpose() * g),
+                    &(map.transpose() * h * map),
+                    lambda,
+                    &free,
+                )?;
+                Some(map * step)
+            }
+            None => damped_step(g, h, lambda, &free),
+        }
+    };
+    let (mut f, mut g, mut h) = problem.evaluate(&x, true);
+    let mut lambda = 1e-3;
+    let mut iterations = 0;
+    let mut small_steps = 0;
+    while iterations < stopping.max_iterations {
+        iterations += 1;
+        let Some(step) = solve_step(&g, &h, lambda) else {
+            break;
+        };
+        let trial = problem.admit(x + step);
+        let f_trial = trial.map_or(f64::INFINITY, |t| problem.evaluate(&t, false).0);
+        match trial {
+            Some(trial) if f_trial < f => {
+                let decrease = f - f_trial;
+                let step = trial - x;
+                x = problem.accept(trial);
+                (f, g, h) = problem.evaluate(&x, true);
+                lambda = (lambda / 3.0).max(1e-9);
+                small_steps = if decrease < stopping.decrease {
+                    small_steps + 1
+                } else {
+                    0
+                };
+                if small_steps >= 2 || step.norm() < stopping.step {
+                    break;
+                }
+            }
+            _ => {
+                lambda *= 4.0;
+                if lambda > 1e6 {
+                    break;
+                }
+            }
+        }
+    }
+    Minimum {
+        x,
+        value: f,
+        iterations,
+    }
+}
+
+/// (H + lambda diag H) step = -g over the free parameters (the others do not move).
+fn damped_step(g: &Vector, h: &Matrix, lambda: f64, free: &[bool; PARAMETERS]) -> Option<Vector> {
+    let mut a = *h;
+    let mut b = -*g;
+    for k in 0..PARAMETERS {
+        if free[k] {
+            a[(k, k)] += lambda * h[(k, k)].max(1e-12);
+        } else {
+            for j in 0..PARAMETERS {
+                a[(k, j)] = 0.0;
+                a[(j, k)] = 0.0;
+            }
+            a[(k, k)] = 1.0;
+            b[k] = 0.0;
+        }
+    }
+    let step = a.cholesky()?.solve(&b);
+    step.iter().all(|v| v.is_finite()).then_some(step)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A Gaussian's negative mean log-likelihood in 13 independent parameters centred
+    /// at `centre`: its minimum is the centre, its BHHH Hessian the identity.
+    struct Bowl {
+        centre: Vector,
+        lower: f64,
+    }
+
+    impl LikelihoodProblem for Bowl {
+        fn evaluate(&self, x: &Vector, _: bool) -> (f64, Vector, Matrix) {
+            let d = x - self.centre;
+            (0.5 * d.norm_squared(), d, Matrix::identity())
+        }
+        fn admit(&self, x: Vector) -> Option<Vector> {
+            Some(x.map(|v| v.max(self.lower)))
+        }
+        fn accept(&mut self, x: Vector) -> Vector {
+            x
+        }
+    }
+
+    fn stopping() -> Stopping {
+        Stopping {
+            max_iterations: 100,
+            decrease: 1e-12,
+            step: 1e-12,
+        }
+    }
+
+    #[test]
+    fn it_reaches_the_minimum_and_leaves_held_parameters_alone() {
+        let centre = Vector::from_fn(|k, _| k as f64 * 0.1);
+        let mut bowl = Bowl {
+            centre,
+            lower: -10.0,
+        };
+        let mut held = [false; PARAMETERS];
+        held[2] = true;
+        let minimum = minimise(
+            &mut bowl,
+            Vector::from_element(1.0),
+            &Held {
+                parameters: held,
+                axis: None,
+            },
+            &stopping(),
+        );
+        for k in 0..PARAMETERS {
+            let expected = if k == 2 { 1.0 } else { centre[k] };
+            assert!(
+                (minimum.x[k] - expected).abs() < 1e-6,
+                "{k}: {}",
+                minimum.x[k]
+            );
+        }
+    }
+
+    #[test]
+    fn a_known_axis_turns_the_fit_about_it_alone() {
+        let centre = Vector::from_fn(|k, _| if (9..12).contains(&k) { 0.3 } else { 0.0 });
+        let mut bowl = Bowl {
+            centre,
+            lower: -10.0,
+        };
+        let minimum = minimise(
+            &mut bowl,
+            Vector::zeros(),
+            &Held {
+                parameters: [false; PARAMETERS],
+                axis: Some(DVec3::Z),
+            },
+            &stopping(),
+        );
+        assert!(minimum.x[9].abs() < 1e-9 && minimum.x[10].abs() < 1e-9);
+        assert!((minimum.x[11] - 0.3).abs() < 1e-6, "{}", minimum.x[11]);
+    }
+
+    #[test]
+    fn a_step_is_projected_where_the_problem_says() {
+        let centre = Vector::from_element(-1.0);
+        let mut bowl = Bowl { centre, lower: 0.0 };
+        let minimum = minimise(
+            &mut bowl,
+            Vector::from_element(1.0),
+            &Held {
+                parameters: [false; PARAMETERS],
+                axis: None,
+            },
+            &stopping(),
+        );
+        assert!(
+            minimum.x.iter().all(|v| (v - 0.0).abs() < 1e-9),
+            "{minimum:?}"
+        );
+    }
+}
