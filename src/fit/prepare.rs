@@ -86,195 +86,156 @@ pub(super) fn prepare<'a>(
     o: &FitOptions,
     start_set: StartSet,
 ) -> Result<Prepared<'a>, FitError> {
-    if let Some(budget) = o.time_budget_ms
-        && !(budget.is_finite() && budget > 0.0)
-    {
-        return Err(FitError::InvalidOption(format!(
-            "the time budget must be a positive number of milliseconds, got {budget}"
-        )));
-    }
-    if !(o.refine_scale.is_finite() && o.refine_scale >= 0.0) {
-        return Err(FitError::InvalidOption(format!(
-            "refine scale must be finite and >= 0, got {}",
-            o.refine_scale
-        )));
-    }
-    if o.stage1_points < MIN_POINTS || o.stage2_points < MIN_POINTS {
-        return Err(FitError::InvalidOption(format!(
-            "points per stage must be at least {MIN_POINTS}"
-        )));
-    }
-    if o.polish_points != 0 && o.polish_points < MIN_POINTS {
-        return Err(FitError::InvalidOption(format!(
-            "polish points must be 0 (no polish) or at least {MIN_POINTS}"
-        )));
-    }
+    check_options(o)?;
     let (axes, _) = check_cloud(points)?;
     let norm = Normalization::of(points);
     let normalised = norm.points(points);
     let mut rng = synth::rng(o.seed);
     let stage1_pts = synth::subsample(&normalised, o.stage1_points, &mut rng);
     let stage2_pts = synth::subsample(&normalised, o.stage2_points, &mut rng);
-    let (mut stage1_free, mut stage2_free) = match o.viewpoint.position() {
-        None => (Vec::new(), Vec::new()),
-        Some(v) if !v.is_finite() => {
-            return Err(FitError::InvalidOption(
-                "the viewpoint must be finite".into(),
-            ));
+    let viewpoint = o.viewpoint.position().map(|v| norm.point(v));
+    let free = |sample: &[DVec3]| free_space_of(o, &norm, viewpoint, sample);
+    let (stage1_free, stage2_free) = (free(&stage1_pts), free(&stage2_pts));
+    let bounds = o.bounds();
+    let paper = o.method == Method::Paper;
+    let known = known_shape(o, &norm, &bounds)?;
+    // normal lines meet the hole axis (see `starts`): the start that handles partial views
+    let axis_sample = synth::subsample(&normalised, 400, &mut rng.clone());
+    let (mut starts, mut across) = if paper {
+        (paper_starts(&stage1_pts, o.known_axis), Vec::new())
+    } else {
+        let (mut on_lines, across) =
+            normal_line_starts(&axis_sample, axes, o, viewpoint, start_set);
+        on_lines.extend(principal_axis_starts(&stage1_pts, axes, o.known_axis));
+        (on_lines, across)
+    };
+    for start in starts.iter_mut().chain(&mut across) {
+        start.shape = holding_known(start.shape, &known);
+    }
+    // with a1 and a2 both held, the in-plane turn cannot trade them any more: each start
+    // also goes a quarter turn about its axis
+    if known[0].is_some() && known[1].is_some() {
+        for starts in [&mut starts, &mut across] {
+            let turned: Vec<Candidate> = starts
+                .iter()
+                .map(|s| {
+                    let mut t = *s;
+                    t.pose.rotation =
+                        s.pose.rotation * DQuat::from_rotation_z(std::f64::consts::FRAC_PI_2);
+                    t
+                })
+                .collect();
+            starts.extend(turned);
         }
-        Some(v) => {
-            let v = norm.point(v);
-            (
-                free_space::in_front(&stage1_pts, v),
-                free_space::in_front(&stage2_pts, v),
-            )
+    }
+    let starts = match start_set {
+        StartSet::Usual => starts,
+        StartSet::Broad => {
+            // the normal lines' starts (the first three) behind the skin
+            let behind: Vec<Candidate> = match viewpoint {
+                Some(v) if !paper => starts
+                    .iter()
+                    .take(3)
+                    .filter_map(|s| starts::behind_the_skin(s, v))
+                    .collect(),
+                _ => Vec::new(),
+            };
+            starts.into_iter().chain(across).chain(behind).collect()
         }
     };
+    let (opts1, opts2) = solver_options(o, &known);
+    Ok(Prepared {
+        points,
+        method: o.method,
+        norm,
+        stage1_pts,
+        stage2_pts,
+        stage1_free,
+        stage2_free,
+        starts,
+        bounds,
+        opts1,
+        opts2,
+        max_overreach: (!paper).then_some(MAX_OVERREACH),
+        refine_scale: (!paper && o.refine_scale > 0.0).then_some(o.refine_scale),
+        viewpoint,
+        known,
+        noise_model: !paper && o.noise_model,
+        known_axis: o.known_axis.is_some(),
+        scatter: std::sync::OnceLock::new(),
+        skip: o.skip.clone(),
+    })
+}
+
+/// The options a fit cannot run with, named.
+fn check_options(o: &FitOptions) -> Result<(), FitError> {
+    let invalid = |message: String| Err(FitError::InvalidOption(message));
+    if let Some(budget) = o.time_budget_ms
+        && !(budget.is_finite() && budget > 0.0)
+    {
+        return invalid(format!(
+            "the time budget must be a positive number of milliseconds, got {budget}"
+        ));
+    }
+    if !(o.refine_scale.is_finite() && o.refine_scale >= 0.0) {
+        return invalid(format!(
+            "refine scale must be finite and >= 0, got {}",
+            o.refine_scale
+        ));
+    }
+    if o.stage1_points < MIN_POINTS || o.stage2_points < MIN_POINTS {
+        return invalid(format!("points per stage must be at least {MIN_POINTS}"));
+    }
+    if o.polish_points != 0 && o.polish_points < MIN_POINTS {
+        return invalid(format!(
+            "polish points must be 0 (no polish) or at least {MIN_POINTS}"
+        ));
+    }
+    if o.viewpoint.position().is_some_and(|v| !v.is_finite()) {
+        return invalid("the viewpoint must be finite".into());
+    }
+    if let Some(plane) = &o.support
+        && !(plane.normal().is_finite() && plane.offset.is_finite())
+    {
+        return invalid("the support plane must be finite".into());
+    }
+    if !o.seen_through.iter().all(|p| p.is_finite()) {
+        return invalid("the points seen through must be finite".into());
+    }
+    if o.known_axis.is_some_and(|a| !(a.length() > 0.0)) {
+        return invalid("known axis must not be zero".into());
+    }
+    Ok(())
+}
+
+/// The free-space points of a sample (normalised): in front of it seen from the
+/// viewpoint, under it inside the support plane, and the caller's points seen through.
+fn free_space_of(
+    o: &FitOptions,
+    norm: &Normalization,
+    viewpoint: Option<DVec3>,
+    sample: &[DVec3],
+) -> Vec<DVec3> {
+    let mut free = viewpoint.map_or_else(Vec::new, |v| free_space::in_front(sample, v));
     if let Some(plane) = &o.support {
         // the plane in the normalised frame: n·(s x + c) + d = 0
         let normal = plane.normal();
-        if !(normal.is_finite() && plane.offset.is_finite()) {
-            return Err(FitError::InvalidOption(
-                "the support plane must be finite".into(),
-            ));
-        }
         let offset = (plane.offset + normal.dot(norm.centre)) / norm.scale;
-        stage1_free.extend(free_space::below_support(&stage1_pts, normal, offset));
-        stage2_free.extend(free_space::below_support(&stage2_pts, normal, offset));
+        free.extend(free_space::below_support(sample, normal, offset));
     }
-    if !o.seen_through.iter().all(|p| p.is_finite()) {
-        return Err(FitError::InvalidOption(
-            "the points seen through must be finite".into(),
-        ));
-    }
-    if !o.seen_through.is_empty() {
-        let free: Vec<DVec3> = o.seen_through.iter().map(|&p| norm.point(p)).collect();
-        stage1_free.extend(&free);
-        stage2_free.extend(free);
-    }
-    let bounds = o.bounds();
-    let paper = o.method == Method::Paper;
-    // (the paper's stage 2 rewards a wider hole)
-    let a4_reward = if paper { PAPER_A4_REWARD } else { 0.0 };
-    let loss = if paper {
-        Loss::Squared
-    } else {
-        Loss::Huber(o.huber)
-    };
+    free.extend(o.seen_through.iter().map(|&p| norm.point(p)));
+    free
+}
 
-    // Stage 1: batched multi-start.
-    let axes_to_try: Vec<DVec3> = match o.known_axis {
-        Some(a) if a.length() > 0.0 => vec![a.normalize()],
-        Some(_) => {
-            return Err(FitError::InvalidOption(
-                "known axis must not be zero".into(),
-            ));
-        }
-        None => vec![axes.z_axis, axes.y_axis, axes.x_axis],
-    };
-    let mut starts = Vec::new();
-    let mut across_starts = Vec::new();
-    // normal lines meet the hole axis (see `starts`): the start that handles partial views
-    let axis_sample = synth::subsample(&normalised, 400, &mut rng.clone());
-    let normals = starts::estimate_normals(&axis_sample, 12);
-    let line = match o.known_axis {
-        Some(d) => starts::axis_point_for_direction(&axis_sample, &normals, d.normalize())
-            .map(|c| (d.normalize(), c)),
-        None => starts::axis_from_normal_lines(&axis_sample, &normals),
-    };
-    if let Some((axis, on_axis)) = line.filter(|_| !paper) {
-        let hint = if axis.dot(axes.x_axis).abs() > 0.9 {
-            axes.y_axis
-        } else {
-            axes.x_axis
-        };
-        // the in-plane angle: a squarish section (eps2 < 1) turned 45 degrees looks like
-        // a diamond (eps2 > 1), a local minimum, so both turns start
-        let turned = DQuat::from_axis_angle(axis, std::f64::consts::FRAC_PI_4) * hint;
-        for hint in [hint, turned] {
-            for a4 in [None, Some(1.3), Some(2.5)] {
-                starts.push(starts::start_on_axis_line(
-                    &axis_sample,
-                    axis,
-                    on_axis,
-                    hint,
-                    a4,
-                ));
-            }
-        }
-        if let Some(across) =
-            starts::across_line_of_sight(axis, o.viewpoint.position().map(|v| norm.point(v)))
-                .filter(|_| start_set != StartSet::Usual && o.known_axis.is_none())
-            && let Some(on_across) =
-                starts::axis_point_for_direction(&axis_sample, &normals, across)
-        {
-            for a4 in [None, Some(1.3), Some(2.5)] {
-                across_starts.push(starts::start_on_axis_line(
-                    &axis_sample,
-                    across,
-                    on_across,
-                    axis,
-                    a4,
-                ));
-            }
-        }
-    }
-    if paper {
-        // x, y, z of the cloud's frame, centroid, a3 = 0.6 of the half-diagonal
-        let (lo, hi) = stage1_pts
-            .iter()
-            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
-                (lo.min(*p), hi.max(*p))
-            });
-        let a3 = 0.6 * 0.5 * (hi - lo).length();
-        let axes_to_try = match o.known_axis {
-            Some(a) => vec![a.normalize()],
-            None => vec![DVec3::X, DVec3::Y, DVec3::Z],
-        };
-        for axis in axes_to_try {
-            let hint = if axis.dot(DVec3::X).abs() > 0.9 {
-                DVec3::Y
-            } else {
-                DVec3::X
-            };
-            let mut start = start_for_axis(&stage1_pts, axis, hint, 1.5);
-            start.shape.a3 = a3;
-            starts.push(start);
-        }
-    } else {
-        for axis in &axes_to_try {
-            let hint = if axis.dot(axes.x_axis).abs() > 0.9 {
-                axes.y_axis
-            } else {
-                axes.x_axis
-            };
-            for a4 in [1.5, 3.0] {
-                starts.push(start_for_axis(&stage1_pts, *axis, hint, a4));
-            }
-        }
-    }
-    let mut opts1 = SolverOptions {
-        loss,
-        max_iterations: 40,
-        cost_tolerance: 1e-5,
-        prune_after: if paper { 0 } else { 4 },
-        prune_ratio: 1.5,
-        // starts that met in one basin run on as one (the paper clouds' stage 1 sends
-        // two to five of its twelve starts into one basin)
-        merge_tolerance: if paper { 0.0 } else { MERGE_TOLERANCE },
-        // normalised units (the cloud's RMS radius is 1): stage 2 polishes
-        step_tolerance: 1e-3,
-        ..Default::default()
-    };
-    if o.known_axis.is_some() {
-        opts1.fixed[9] = true;
-        opts1.fixed[10] = true;
-    }
-    // known shape parameters: validated, put into every start and held fixed
+/// The known shape parameters (sizes normalised), each checked to be plausible.
+fn known_shape(
+    o: &FitOptions,
+    norm: &Normalization,
+    bounds: &Bounds,
+) -> Result<[Option<f64>; 6], FitError> {
     let mut known = [None; 6];
     for (i, value) in o.known_shape.iter().enumerate() {
         let Some(value) = *value else { continue };
-        // sizes go into the normalised frame
         let v = if i < 3 { value / norm.scale } else { value };
         let plausible = match i {
             0..3 => (0.002..=5.0).contains(&v),
@@ -292,29 +253,157 @@ pub(super) fn prepare<'a>(
                 }
             )));
         }
-        opts1.fixed[i] = true;
         known[i] = Some(v);
     }
-    for start in starts.iter_mut().chain(&mut across_starts) {
-        start.shape = holding_known(start.shape, &known);
+    Ok(known)
+}
+
+/// The hint for the in-plane direction of a start about `axis`: a principal axis across
+/// it.
+fn hint_across(axis: DVec3, axes: DMat3) -> DVec3 {
+    if axis.dot(axes.x_axis).abs() > 0.9 {
+        axes.y_axis
+    } else {
+        axes.x_axis
     }
-    // with a1 and a2 both held, the in-plane turn cannot trade them any more: each start
-    // also goes a quarter turn about its axis
-    if known[0].is_some() && known[1].is_some() {
-        for starts in [&mut starts, &mut across_starts] {
-            let turned: Vec<Candidate> = starts
-                .iter()
-                .map(|s| {
-                    let mut t = *s;
-                    t.pose.rotation =
-                        s.pose.rotation * DQuat::from_rotation_z(std::f64::consts::FRAC_PI_2);
-                    t
-                })
-                .collect();
-            starts.extend(turned);
+}
+
+/// The starts on the hole axis the normal lines give (or on the known axis through
+/// them), at three hole ratios and two in-plane turns (a squarish top view turned 45
+/// degrees looks like a diamond, a local minimum); and, for the broad set with a
+/// viewpoint, the same across the line of sight (an edge-on ring's normal lines point
+/// elsewhere).
+fn normal_line_starts(
+    axis_sample: &[DVec3],
+    axes: DMat3,
+    o: &FitOptions,
+    viewpoint: Option<DVec3>,
+    start_set: StartSet,
+) -> (Vec<Candidate>, Vec<Candidate>) {
+    let normals = starts::estimate_normals(axis_sample, 12);
+    let line = match o.known_axis {
+        Some(d) => starts::axis_point_for_direction(axis_sample, &normals, d.normalize())
+            .map(|c| (d.normalize(), c)),
+        None => starts::axis_from_normal_lines(axis_sample, &normals),
+    };
+    let (mut starts, mut across_starts) = (Vec::new(), Vec::new());
+    let Some((axis, on_axis)) = line else {
+        return (starts, across_starts);
+    };
+    let hint = hint_across(axis, axes);
+    let turned = DQuat::from_axis_angle(axis, std::f64::consts::FRAC_PI_4) * hint;
+    for hint in [hint, turned] {
+        for a4 in [None, Some(1.3), Some(2.5)] {
+            starts.push(starts::start_on_axis_line(
+                axis_sample,
+                axis,
+                on_axis,
+                hint,
+                a4,
+            ));
         }
     }
+    if let Some(across) = starts::across_line_of_sight(axis, viewpoint)
+        .filter(|_| start_set != StartSet::Usual && o.known_axis.is_none())
+        && let Some(on_across) = starts::axis_point_for_direction(axis_sample, &normals, across)
+    {
+        for a4 in [None, Some(1.3), Some(2.5)] {
+            across_starts.push(starts::start_on_axis_line(
+                axis_sample,
+                across,
+                on_across,
+                axis,
+                a4,
+            ));
+        }
+    }
+    (starts, across_starts)
+}
 
+/// Starts on the cloud's principal axes (or the known axis) at its centroid, at two hole
+/// ratios.
+fn principal_axis_starts(
+    stage1_pts: &[DVec3],
+    axes: DMat3,
+    known_axis: Option<DVec3>,
+) -> Vec<Candidate> {
+    let axes_to_try = match known_axis {
+        Some(a) => vec![a.normalize()],
+        None => vec![axes.z_axis, axes.y_axis, axes.x_axis],
+    };
+    let mut starts = Vec::new();
+    for axis in axes_to_try {
+        for a4 in [1.5, 3.0] {
+            starts.push(start_for_axis(
+                stage1_pts,
+                axis,
+                hint_across(axis, axes),
+                a4,
+            ));
+        }
+    }
+    starts
+}
+
+/// The paper's starts (§V): x, y and z of the cloud's frame (or the known axis) at the
+/// centroid, a3 = 0.6 of the half-diagonal.
+fn paper_starts(stage1_pts: &[DVec3], known_axis: Option<DVec3>) -> Vec<Candidate> {
+    let (lo, hi) = stage1_pts
+        .iter()
+        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(*p), hi.max(*p))
+        });
+    let a3 = 0.6 * 0.5 * (hi - lo).length();
+    let axes_to_try = match known_axis {
+        Some(a) => vec![a.normalize()],
+        None => vec![DVec3::X, DVec3::Y, DVec3::Z],
+    };
+    axes_to_try
+        .into_iter()
+        .map(|axis| {
+            let hint = if axis.dot(DVec3::X).abs() > 0.9 {
+                DVec3::Y
+            } else {
+                DVec3::X
+            };
+            let mut start = start_for_axis(stage1_pts, axis, hint, 1.5);
+            start.shape.a3 = a3;
+            start
+        })
+        .collect()
+}
+
+/// Both stages' solver settings: the loss, what is held (a known axis: the turns off
+/// it; known shape parameters), and each stage's stopping rules.
+fn solver_options(o: &FitOptions, known: &[Option<f64>; 6]) -> (SolverOptions, SolverOptions) {
+    let paper = o.method == Method::Paper;
+    let loss = if paper {
+        Loss::Squared
+    } else {
+        Loss::Huber(o.huber)
+    };
+    let mut opts1 = SolverOptions {
+        loss,
+        max_iterations: 40,
+        cost_tolerance: 1e-5,
+        prune_after: if paper { 0 } else { 4 },
+        prune_ratio: 1.5,
+        // starts that met in one basin run on as one (the paper clouds' stage 1 sends
+        // two to five of its twelve starts into one basin)
+        merge_tolerance: if paper { 0.0 } else { MERGE_TOLERANCE },
+        // normalised units (the cloud's RMS radius is 1): stage 2 polishes
+        step_tolerance: 1e-3,
+        ..Default::default()
+    };
+    if o.known_axis.is_some() {
+        opts1.fixed[9] = true;
+        opts1.fixed[10] = true;
+    }
+    for (fixed, known) in opts1.fixed.iter_mut().zip(known) {
+        *fixed |= known.is_some();
+    }
+    // (the paper's stage 2 rewards a wider hole)
+    let a4_reward = if paper { PAPER_A4_REWARD } else { 0.0 };
     let opts2 = SolverOptions {
         loss,
         shape_prior: [0.0, 0.0, 0.0, -a4_reward, 0.0, 0.0],
@@ -328,45 +417,7 @@ pub(super) fn prepare<'a>(
         max_iterations: 30,
         ..Default::default()
     };
-    Ok(Prepared {
-        points,
-        method: o.method,
-        norm,
-        stage1_pts,
-        stage2_pts,
-        stage1_free,
-        stage2_free,
-        starts: match start_set {
-            StartSet::Usual => starts,
-            StartSet::Broad => {
-                // the normal lines' starts (the first three) behind the skin
-                let behind: Vec<Candidate> = match o.viewpoint.position() {
-                    Some(v) if !paper => starts
-                        .iter()
-                        .take(3)
-                        .filter_map(|s| starts::behind_the_skin(s, norm.point(v)))
-                        .collect(),
-                    _ => Vec::new(),
-                };
-                starts
-                    .into_iter()
-                    .chain(across_starts)
-                    .chain(behind)
-                    .collect()
-            }
-        },
-        bounds,
-        opts1,
-        opts2,
-        max_overreach: (!paper).then_some(MAX_OVERREACH),
-        refine_scale: (!paper && o.refine_scale > 0.0).then_some(o.refine_scale),
-        viewpoint: o.viewpoint.position().map(|v| norm.point(v)),
-        known,
-        noise_model: !paper && o.noise_model,
-        known_axis: o.known_axis.is_some(),
-        scatter: std::sync::OnceLock::new(),
-        skip: o.skip.clone(),
-    })
+    (opts1, opts2)
 }
 
 impl Prepared<'_> {
