@@ -138,46 +138,7 @@ pub(crate) fn visibility(
     let width = ((hi.0 - lo.0) / pixel) as usize + 1;
     let height = ((hi.1 - lo.1) / pixel) as usize + 1;
     let screen = |(u, w, z): (f64, f64, f64)| ((u - lo.0) / pixel, (w - lo.1) / pixel, z);
-    // the nearest surface per pixel, as 1/depth (affine across a triangle on the screen;
-    // 0: nothing there)
-    let raster =
-        |nearest: &mut [f32], a: (f64, f64, f64), b: (f64, f64, f64), c: (f64, f64, f64)| {
-            let x0 = (a.0.min(b.0).min(c.0) - 0.5).ceil().max(0.0);
-            let x1 = (a.0.max(b.0).max(c.0) - 0.5)
-                .floor()
-                .min(width as f64 - 1.0);
-            let y0 = (a.1.min(b.1).min(c.1) - 0.5).ceil().max(0.0);
-            let y1 = (a.1.max(b.1).max(c.1) - 0.5)
-                .floor()
-                .min(height as f64 - 1.0);
-            // (most triangles are about a pixel wide; many hold no pixel's centre)
-            if x1 < x0 || y1 < y0 {
-                return;
-            }
-            let area = (b.0 - a.0) * (c.1 - a.1) - (c.0 - a.0) * (b.1 - a.1);
-            if area.abs() < 1e-12 {
-                return;
-            }
-            let scale = 1.0 / area;
-            let (ia, ib, ic) = (1.0 / a.2, 1.0 / b.2, 1.0 / c.2);
-            for py in y0 as usize..=y1 as usize {
-                let y = py as f64 + 0.5;
-                for px in x0 as usize..=x1 as usize {
-                    let x = px as f64 + 0.5;
-                    let wa = ((b.0 - x) * (c.1 - y) - (c.0 - x) * (b.1 - y)) * scale;
-                    let wb = ((c.0 - x) * (a.1 - y) - (a.0 - x) * (c.1 - y)) * scale;
-                    let wc = 1.0 - wa - wb;
-                    if wa < -1e-9 || wb < -1e-9 || wc < -1e-9 {
-                        continue;
-                    }
-                    let inverse = (wa * ia + wb * ib + wc * ic) as f32;
-                    let k = py * width + px;
-                    if inverse > nearest[k] {
-                        nearest[k] = inverse;
-                    }
-                }
-            }
-        };
+    let raster = |nearest: &mut [f32], a, b, c| raster(nearest, (width, height), a, b, c);
     let on_screen: Vec<Option<(f64, f64, f64)>> = projected.iter().map(|p| p.map(screen)).collect();
     let triangles_of_ring = |nearest: &mut [f32], i: usize| {
         let next_ring = if i + 1 == rings { 0 } else { i + 1 };
@@ -238,4 +199,51 @@ pub(crate) fn visibility(
             depth <= 1.0 / nearest[k] as f64 + 0.25 * spacing + slope
         })
         .collect()
+}
+
+/// Draws the triangle a b c (screen x, y in pixels, depth) into `nearest`, the nearest
+/// surface per pixel of a `width` x `height` screen as 1/depth (affine across a triangle
+/// on the screen; 0: nothing there).
+fn raster(
+    nearest: &mut [f32],
+    (width, height): (usize, usize),
+    a: (f64, f64, f64),
+    b: (f64, f64, f64),
+    c: (f64, f64, f64),
+) {
+    let x0 = (a.0.min(b.0).min(c.0) - 0.5).ceil().max(0.0);
+    let x1 = (a.0.max(b.0).max(c.0) - 0.5)
+        .floor()
+        .min(width as f64 - 1.0);
+    let y0 = (a.1.min(b.1).min(c.1) - 0.5).ceil().max(0.0);
+    let y1 = (a.1.max(b.1).max(c.1) - 0.5)
+        .floor()
+        .min(height as f64 - 1.0);
+    // (most triangles are about a pixel wide; many hold no pixel's centre)
+    if x1 < x0 || y1 < y0 {
+        return;
+    }
+    let area = (b.0 - a.0) * (c.1 - a.1) - (c.0 - a.0) * (b.1 - a.1);
+    if area.abs() < 1e-12 {
+        return;
+    }
+    let scale = 1.0 / area;
+    let (ia, ib, ic) = (1.0 / a.2, 1.0 / b.2, 1.0 / c.2);
+    for py in y0 as usize..=y1 as usize {
+        let y = py as f64 + 0.5;
+        for px in x0 as usize..=x1 as usize {
+            let x = px as f64 + 0.5;
+            let wa = ((b.0 - x) * (c.1 - y) - (c.0 - x) * (b.1 - y)) * scale;
+            let wb = ((c.0 - x) * (a.1 - y) - (a.0 - x) * (c.1 - y)) * scale;
+            let wc = 1.0 - wa - wb;
+            if wa < -1e-9 || wb < -1e-9 || wc < -1e-9 {
+                continue;
+            }
+            let inverse = (wa * ia + wb * ib + wc * ic) as f32;
+            let k = py * width + px;
+            if inverse > nearest[k] {
+                nearest[k] = inverse;
+            }
+        }
+    }
 }

@@ -339,6 +339,74 @@ impl<'a> Window<'a> {
         })
     }
 
+    /// Adds the partials of ln(element weight) in the shape (past ln lambda's) to
+    /// `log_weight`, and the element's share of d sum / d sight (`term` its kernel term)
+    /// to `by_sight`: section node k by sweep sample m, its area without a sight line,
+    /// seen along `sight` its projected area.
+    fn add_log_weight_partials(
+        &self,
+        k: usize,
+        m: usize,
+        sight: Option<DVec3>,
+        term: f64,
+        log_weight: &mut [f64; 6],
+        by_sight: &mut DVec3,
+    ) {
+        let Shape { a1, a2, a3, .. } = self.shape;
+        let [cx, cy] = self.sweep.point[m];
+        let [dx, dy] = self.sweep.tangent[m];
+        let cross = cx * dy - cy * dx;
+        let [dcx, dcy] = self.sweep.d_point[m];
+        let [ddx, ddy] = self.sweep.d_tangent[m];
+        let d_cross = dcx * dy + cx * ddy - dcy * dx - cy * ddx;
+        match sight {
+            Some(v) => {
+                // d ln sum_h (-facing_h) over the halves that face the sensor
+                let facing = self.half_facing(k, dx, dy, cross, v);
+                let total: f64 = facing.iter().map(|f| (-f).max(0.0)).sum();
+                let turn = dy * v.x - dx * v.y;
+                for h in 0..2 {
+                    if facing[h] >= 0.0 {
+                        continue;
+                    }
+                    let [tc, tw] = self.section.halves[k][h];
+                    let [dtc, dtw] = self.section.d_halves[k][h];
+                    let per = 1.0 / -total;
+                    // (D scales with a1 along x and a2 along y, the cross with a1·a2)
+                    log_weight[0] += (a3 * tw * (-dx * v.y) - tc * cross * v.z) / a1 * per;
+                    log_weight[1] += (a3 * tw * (dy * v.x) - tc * cross * v.z) / a2 * per;
+                    log_weight[2] += tw * turn * per;
+                    log_weight[4] += (a3 * dtw * turn - dtc * cross * v.z) * per;
+                    log_weight[5] += (a3 * tw * (ddy * v.x - ddx * v.y) - tc * d_cross * v.z) * per;
+                    *by_sight += term * DVec3::new(a3 * tw * dy, -a3 * tw * dx, -tc * cross) * per;
+                }
+            }
+            None => {
+                // d|n| = d|n|² / 2|n| for each half, over their sum
+                let dd = dx * dx + dy * dy;
+                let areas = self.half_areas(k, dx, dy, cross);
+                let total = areas[0] + areas[1];
+                for h in 0..2 {
+                    let [tc, tw] = self.section.halves[k][h];
+                    let [dtc, dtw] = self.section.d_halves[k][h];
+                    let per = 1.0 / (areas[h].max(1e-300) * total);
+                    if areas[h] == 0.0 {
+                        continue;
+                    }
+                    log_weight[0] +=
+                        (a3 * a3 * tw * tw * dx * dx + tc * tc * cross * cross) / a1 * per;
+                    log_weight[1] +=
+                        (a3 * a3 * tw * tw * dy * dy + tc * tc * cross * cross) / a2 * per;
+                    log_weight[2] += a3 * tw * tw * dd * per;
+                    log_weight[4] += (a3 * a3 * tw * dtw * dd + tc * dtc * cross * cross) * per;
+                    log_weight[5] += (a3 * a3 * tw * tw * (dx * ddx + dy * ddy)
+                        + tc * tc * cross * d_cross)
+                        * per;
+                }
+            }
+        }
+    }
+
     /// The kernel sum of canonical point `q` (seen along canonical `sight`, from the
     /// viewpoint to the point) over the surface within the cutoff, with its partials.
     fn sums(&self, q: DVec3, sight: Option<DVec3>, with_gradient: bool) -> PointSums {
@@ -435,58 +503,8 @@ impl<'a> Window<'a> {
                 }
                 out.ln_sigma += slope * d2;
                 // through the weight: ln lambda, then the area or the projected area
-                let [ddx, ddy] = self.sweep.d_tangent[m];
-                let d_cross = dcx * dy + cx * ddy - dcy * dx - cy * ddx;
                 let mut log_weight = [0.0, 0.0, 0.0, 1.0 / lambda, dc / lambda, 0.0];
-                match sight {
-                    Some(v) => {
-                        // d ln sum_h (-facing_h) over the halves that face the sensor
-                        let facing = self.half_facing(k, dx, dy, cross, v);
-                        let total: f64 = facing.iter().map(|f| (-f).max(0.0)).sum();
-                        let turn = dy * v.x - dx * v.y;
-                        for h in 0..2 {
-                            if facing[h] >= 0.0 {
-                                continue;
-                            }
-                            let [tc, tw] = self.section.halves[k][h];
-                            let [dtc, dtw] = self.section.d_halves[k][h];
-                            let per = 1.0 / -total;
-                            // (D scales with a1 along x and a2 along y, the cross with a1·a2)
-                            log_weight[0] += (a3 * tw * (-dx * v.y) - tc * cross * v.z) / a1 * per;
-                            log_weight[1] += (a3 * tw * (dy * v.x) - tc * cross * v.z) / a2 * per;
-                            log_weight[2] += tw * turn * per;
-                            log_weight[4] += (a3 * dtw * turn - dtc * cross * v.z) * per;
-                            log_weight[5] +=
-                                (a3 * tw * (ddy * v.x - ddx * v.y) - tc * d_cross * v.z) * per;
-                            out.by_sight +=
-                                term * DVec3::new(a3 * tw * dy, -a3 * tw * dx, -tc * cross) * per;
-                        }
-                    }
-                    None => {
-                        // d|n| = d|n|² / 2|n| for each half, over their sum
-                        let dd = dx * dx + dy * dy;
-                        let areas = self.half_areas(k, dx, dy, cross);
-                        let total = areas[0] + areas[1];
-                        for h in 0..2 {
-                            let [tc, tw] = self.section.halves[k][h];
-                            let [dtc, dtw] = self.section.d_halves[k][h];
-                            let per = 1.0 / (areas[h].max(1e-300) * total);
-                            if areas[h] == 0.0 {
-                                continue;
-                            }
-                            log_weight[0] +=
-                                (a3 * a3 * tw * tw * dx * dx + tc * tc * cross * cross) / a1 * per;
-                            log_weight[1] +=
-                                (a3 * a3 * tw * tw * dy * dy + tc * tc * cross * cross) / a2 * per;
-                            log_weight[2] += a3 * tw * tw * dd * per;
-                            log_weight[4] +=
-                                (a3 * a3 * tw * dtw * dd + tc * dtc * cross * cross) * per;
-                            log_weight[5] += (a3 * a3 * tw * tw * (dx * ddx + dy * ddy)
-                                + tc * tc * cross * d_cross)
-                                * per;
-                        }
-                    }
-                }
+                self.add_log_weight_partials(k, m, sight, term, &mut log_weight, &mut out.by_sight);
                 for p in 0..6 {
                     out.shape[p] += by_shape[p] + term * log_weight[p];
                 }
