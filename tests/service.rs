@@ -23,6 +23,15 @@ fn case_points(seed: u64, partial: bool, noise: f64, outliers: f64) -> Vec<[f64;
         .collect()
 }
 
+/// A request that keeps a worker busy for seconds: `/v1/fit/batch` with twelve noisy
+/// single views with outliers (each a few hundred milliseconds on two cores).
+fn slow_batch() -> Value {
+    let clouds: Vec<Value> = (0..12)
+        .map(|seed| json!({"points": case_points(100 + seed, true, 0.02, 0.05)}))
+        .collect();
+    json!({ "clouds": clouds })
+}
+
 /// A fittable cloud as JSON points.
 fn planar_ok() -> Vec<[f64; 3]> {
     case_points(3, false, 0.0, 0.0)
@@ -204,12 +213,16 @@ fn a_paper_cloud_as_pcd_and_as_json_gives_the_cli_result() {
     assert_eq!(bad.status(), 422);
     assert!(bad.text().unwrap().contains("retries"));
 
-    // the noise model can be turned off, and the option is a boolean
-    let plain = post_pcd(&c, &server, bytes.clone(), "?noise_model=false");
-    assert_eq!(plain.status(), 200);
-    let bad = post_pcd(&c, &server, bytes.clone(), "?noise_model=perhaps");
-    assert_eq!(bad.status(), 422);
-    assert!(bad.text().unwrap().contains("noise_model"));
+    // the fit's own sample sizes and estimators are not options: named, not ignored
+    for (query, named) in [
+        ("?noise_model=false", "noise_model"),
+        ("?stage2_points=2000", "stage2_points"),
+        ("?polish_points=0", "polish_points"),
+    ] {
+        let bad = post_pcd(&c, &server, bytes.clone(), query);
+        assert_eq!(bad.status(), 422, "{query}");
+        assert!(bad.text().unwrap().contains(named), "{query}");
+    }
 
     // a different seed is a different downsampling
     let other: Value = post_pcd(&c, &server, bytes, "?seed=4").json().unwrap();
@@ -714,15 +727,14 @@ fn a_full_queue_answers_503_with_retry_after_and_then_recovers() {
         ..cpu_config()
     });
     let c = client();
-    let points: Vec<[f64; 3]> = case_points(5, false, 0.01, 0.05);
-    // big stages make each fit slow enough for the others to find the worker busy
-    let body = json!({"points": points, "options": {"stage1_points": 2000, "stage2_points": 2000}});
+    // a batch of noisy views keeps the worker busy long enough for the others to find it so
+    let body = slow_batch();
     let results: Vec<(u16, Option<String>, Value)> = std::thread::scope(|scope| {
         let handles: Vec<_> = (0..8)
             .map(|_| {
                 let (c, server, body) = (&c, &server, &body);
                 scope.spawn(move || {
-                    let r = c.post(server.url("/v1/fit")).json(body).send().unwrap();
+                    let r = c.post(server.url("/v1/fit/batch")).json(body).send().unwrap();
                     let retry = r
                         .headers()
                         .get("retry-after")
@@ -747,7 +759,7 @@ fn a_full_queue_answers_503_with_retry_after_and_then_recovers() {
     }
     let after = c
         .post(server.url("/v1/fit"))
-        .json(&json!({"points": points}))
+        .json(&json!({"points": case_points(5, false, 0.01, 0.05)}))
         .send()
         .unwrap();
     assert_eq!(after.status(), 200);
@@ -770,8 +782,7 @@ fn timeouts_and_disconnects_leave_no_queued_request_behind() {
         .timeout(std::time::Duration::from_millis(150))
         .build()
         .unwrap();
-    let points: Vec<[f64; 3]> = case_points(5, false, 0.01, 0.05);
-    let body = json!({"points": points, "options": {"stage1_points": 2000, "stage2_points": 2000}});
+    let body = slow_batch();
     let queued = |c: &Client| -> u64 {
         c.get(server.url("/readyz"))
             .send()
@@ -783,7 +794,7 @@ fn timeouts_and_disconnects_leave_no_queued_request_behind() {
     };
     let post = |client: &Client| {
         client
-            .post(server.url("/v1/fit"))
+            .post(server.url("/v1/fit/batch"))
             .json(&body)
             .send()
             .ok()
@@ -1075,18 +1086,16 @@ fn sigterm_lets_the_in_flight_fit_finish() {
     let (mut server, url) =
         spawn_serve(&["--backend", "cpu"], &[("SUPERTOROID_LOG_FORMAT", "json")]);
     let c = client();
-    let case = supertoroid::suite::ground_truth::make_case(7, false, 0.01, 0.0);
-    let points: Vec<[f64; 3]> =
-        synth::sample_surface(&case.shape, &case.pose, 50_000, &mut synth::rng(7))
-            .iter()
-            .map(|p| p.to_array())
-            .collect();
-    // a slow fit (every point in both stages: seconds), and SIGTERM while it runs
-    let body =
-        json!({"points": points, "options": {"stage1_points": 50000, "stage2_points": 50000}});
+    // a slow request (a batch of noisy views: seconds), and SIGTERM while it runs
+    let body = slow_batch();
     let sent = std::time::Instant::now();
     let response = std::thread::scope(|scope| {
-        let request = scope.spawn(|| c.post(format!("{url}/v1/fit")).json(&body).send().unwrap());
+        let request = scope.spawn(|| {
+            c.post(format!("{url}/v1/fit/batch"))
+                .json(&body)
+                .send()
+                .unwrap()
+        });
         std::thread::sleep(std::time::Duration::from_millis(400));
         // the shell's own kill: no procps needed
         let kill = Command::new("sh")
@@ -1115,7 +1124,7 @@ fn sigterm_lets_the_in_flight_fit_finish() {
     // structured JSON logs on stdout, one object per line
     assert!(
         logs.lines()
-            .any(|l| l.contains("\"route\":\"/v1/fit\"") && l.contains("\"status\":200")),
+            .any(|l| l.contains("\"route\":\"/v1/fit/batch\"") && l.contains("\"status\":200")),
         "{logs}"
     );
 }

@@ -285,11 +285,6 @@ pub struct FitArgs {
     /// evaluator: auto (GPU when found), gpu, cpu; default from SUPERTOROID_BACKEND, else auto
     #[arg(long, value_enum)]
     pub backend: Option<Backend>,
-    /// points in stage 1 / stage 2 (the paper's 150 / 1000)
-    #[arg(long, default_value_t = 150)]
-    pub stage1_points: usize,
-    #[arg(long, default_value_t = 1000)]
-    pub stage2_points: usize,
     /// known hole axis x,y,z in the cloud's frame (e.g. 0,0,1 for "on a table, hole up")
     #[arg(long, allow_hyphen_values = true)]
     pub axis: Option<String>,
@@ -316,14 +311,6 @@ pub struct FitArgs {
     /// through
     #[arg(long, allow_hyphen_values = true)]
     pub viewpoint: Option<String>,
-    /// skip the noise model's refinement of noisy fits (faster on such clouds; their
-    /// sizes and eps then carry the noise's bias)
-    #[arg(long)]
-    pub no_noise_model: bool,
-    /// points of the noise model's final polish of a noisy fit (all of the cloud's where
-    /// it has fewer); 0 turns the polish off (faster by 20-150 ms on such clouds)
-    #[arg(long, default_value_t = crate::fit::POLISH_POINTS)]
-    pub polish_points: usize,
     /// milliseconds after which the noise model's last polish no longer starts; the
     /// search always completes (default: no budget)
     #[arg(long)]
@@ -538,8 +525,6 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
     };
     let options = crate::fit::FitOptions {
         seed: args.seed,
-        stage1_points: args.stage1_points,
-        stage2_points: args.stage2_points,
         known_axis,
         known_shape: args
             .known
@@ -550,8 +535,6 @@ fn fit(args: FitArgs) -> Result<(), Failure> {
         viewpoint,
         method: args.method,
         model: args.model,
-        noise_model: !args.no_noise_model,
-        polish_points: args.polish_points,
         time_budget_ms: args.time_budget_ms,
         ..Default::default()
     };

@@ -37,10 +37,6 @@ pub struct FitRequestOptions {
     pub seed: Option<u64>,
     /// auto (default: the service's evaluator), gpu, or cpu
     pub backend: Option<Backend>,
-    /// points in stage 1 (default 150, the paper's)
-    pub stage1_points: Option<usize>,
-    /// points in stage 2 (default 1000, the paper's)
-    pub stage2_points: Option<usize>,
     /// prior: the hole axis [x, y, z] in the cloud's frame, e.g. [0, 0, 1] for "on a
     /// table, hole up" in a z-up frame
     /// (in a query string: `axis=0,0,1`)
@@ -64,13 +60,6 @@ pub struct FitRequestOptions {
     #[schema(schema_with = crate::fit::viewpoint::request_schema)]
     #[serde(default)]
     pub viewpoint: Option<Viewpoint>,
-    /// refine a noisy fit under a model of the noise (default true; false is faster on
-    /// such clouds, and leaves the noise's bias in sizes and eps)
-    pub noise_model: Option<bool>,
-    /// points of the noise model's final polish of a noisy fit (default 4000; all of
-    /// the cloud's where it has fewer; 0 turns the polish off, saving 20-150 ms on such
-    /// clouds)
-    pub polish_points: Option<usize>,
     /// milliseconds after which the noise model's last polish no longer starts (default:
     /// no budget; the search always completes; a stage left out is named in
     /// `timing_ms.over_budget`)
@@ -140,17 +129,7 @@ fn vector_from_array_or_text<'de, D: serde::Deserializer<'de>>(
 }
 
 impl FitRequestOptions {
-    pub(super) fn job(&self, points: Vec<DVec3>, max_points: usize) -> Result<FitJob, ApiError> {
-        let limit = |v: Option<usize>, default: usize, name: &str| -> Result<usize, ApiError> {
-            let v = v.unwrap_or(default);
-            if v > max_points {
-                return Err(ApiError::unprocessable(
-                    "invalid_option",
-                    format!("{name} must be at most {max_points}"),
-                ));
-            }
-            Ok(v)
-        };
+    pub(super) fn job(&self, points: Vec<DVec3>) -> Result<FitJob, ApiError> {
         let defaults = FitOptions::default();
         let known_axis = match self.axis {
             Some(a) => {
@@ -169,16 +148,12 @@ impl FitRequestOptions {
             points,
             options: FitOptions {
                 seed: self.seed.unwrap_or(0),
-                stage1_points: limit(self.stage1_points, defaults.stage1_points, "stage1_points")?,
-                stage2_points: limit(self.stage2_points, defaults.stage2_points, "stage2_points")?,
                 known_axis,
                 known_shape: crate::fit::known_with_a3(self.known.unwrap_or([None; 6]), self.a3)
                     .map_err(|m| ApiError::unprocessable("invalid_option", m))?,
                 viewpoint: self.viewpoint.unwrap_or_default(),
                 method: self.method.unwrap_or_default(),
                 model: self.model.unwrap_or(defaults.model),
-                noise_model: self.noise_model.unwrap_or(defaults.noise_model),
-                polish_points: limit(self.polish_points, defaults.polish_points, "polish_points")?,
                 time_budget_ms: self.time_budget_ms,
                 ..defaults
             },
@@ -536,7 +511,7 @@ async fn fit_cloud(
         let request: FitRequest = ApiError::parse_json(&bytes)?;
         let points = points_from_json(&state, &request.points)?;
         grasps = super::geometry::checked_grasp_options(request.options.grasps.clone())?;
-        request.options.job(points, state.config.max_points)?
+        request.options.job(points)?
     } else if matches!(
         kind.as_str(),
         "" | "application/octet-stream"
@@ -547,7 +522,7 @@ async fn fit_cloud(
             | "application/x-ply"
     ) {
         let points = crate::io::parse_cloud(&bytes, query.format, limits(&state))?;
-        let mut job = query.job(points, state.config.max_points)?;
+        let mut job = query.job(points)?;
         if job.options.viewpoint == Viewpoint::Auto {
             job.options.viewpoint = crate::io::pcd::header_viewpoint(&bytes, query.format);
         }
@@ -600,7 +575,7 @@ async fn fit_depth(
         ));
     }
     let (points, notes, table) = depth_points(&state, &params, depth_bytes, mask_bytes)?;
-    let mut job = params.options.job(points, state.config.max_points)?;
+    let mut job = params.options.job(points)?;
     // a depth frame's points are in the camera's optical frame: the sensor is the origin
     if job.options.viewpoint == Viewpoint::Auto {
         job.options.viewpoint = Viewpoint::At(DVec3::ZERO, ViewpointSource::Camera);
@@ -923,7 +898,7 @@ async fn fit_batch(
         grasps.push(super::geometry::checked_grasp_options(
             cloud.options.grasps.clone(),
         )?);
-        jobs.push(cloud.options.job(points, state.config.max_points)?);
+        jobs.push(cloud.options.job(points)?);
     }
     let results = state.fitter.run(jobs).await?;
     let error_item = |e: ApiError| BatchItem {

@@ -135,7 +135,7 @@ pub async fn scene(
         .into_iter()
         .zip(&segmentation.objects)
         .map(|(points, object)| {
-            let mut job: FitJob = options.job(points, state.config.max_points)?;
+            let mut job: FitJob = options.job(points)?;
             job.options = object_options(
                 &job.options,
                 &segmentation.plane,
