@@ -258,6 +258,11 @@ fn cli_fit_prints_every_documented_field() {
         "/points/input",
         "/points/stage1",
         "/points/stage2",
+        "/search/starts",
+        "/search/kept",
+        "/search/refined",
+        "/search/estimator",
+        "/search/finalists",
     ] {
         assert!(json.pointer(path).is_some(), "missing {path} in {json}");
     }
@@ -1727,4 +1732,61 @@ fn broadened_views_through_a_depth_sensor_are_fitted_with_no_options() {
         right += usize::from(errors.success());
     }
     assert!(right >= 6, "{right} of 12 right (6 asked)");
+}
+
+/// The report says what the search tried and kept: a noisy single view in its camera's
+/// frame is read both as a view and from nowhere (the report says how far the reading
+/// not taken went) and refined by the likelihood; a precise full cloud said to be seen
+/// from nowhere is read one way and refined by least squares; the paper's method does
+/// not search.
+#[test]
+fn the_report_says_what_the_search_tried_and_kept() {
+    use supertoroid::bench::synthetic::{Presentation, presented};
+    use supertoroid::fit::{Method, Viewpoint};
+    let mut evaluator = CpuEvaluator::new();
+    let case = make_case(7, true, 0.02, 0.0);
+    let (points, viewpoint, _) = presented(&case, Presentation::Camera);
+    let options = FitOptions {
+        seed: 7,
+        viewpoint,
+        ..Default::default()
+    };
+    let r = fit(&mut evaluator, &points, &options).unwrap();
+    let s = r.search.expect("the default method searches");
+    assert!(
+        s.starts >= s.kept && s.kept >= 1 && s.refined >= s.kept,
+        "{s:?}"
+    );
+    assert_eq!(s.estimator, "likelihood", "{s:?}");
+    assert!((1..=2).contains(&s.finalists), "{s:?}");
+    assert!(
+        matches!(
+            s.other_reading_went_to.as_deref(),
+            Some("round 1" | "round 2" | "finalists")
+        ),
+        "{s:?}"
+    );
+
+    let case = make_case(8, false, 0.0, 0.0);
+    let options = FitOptions {
+        seed: 8,
+        viewpoint: Viewpoint::None,
+        ..Default::default()
+    };
+    let r = fit(&mut evaluator, &case.points, &options).unwrap();
+    let s = r.search.expect("the default method searches");
+    assert_eq!(s.estimator, "least_squares", "{s:?}");
+    assert_eq!(s.finalists, 0, "{s:?}");
+    assert_eq!(s.other_reading_went_to, None, "{s:?}");
+
+    let options = FitOptions {
+        method: Method::Paper,
+        ..options
+    };
+    assert!(
+        fit(&mut evaluator, &case.points, &options)
+            .unwrap()
+            .search
+            .is_none()
+    );
 }

@@ -734,7 +734,11 @@ fn a_full_queue_answers_503_with_retry_after_and_then_recovers() {
             .map(|_| {
                 let (c, server, body) = (&c, &server, &body);
                 scope.spawn(move || {
-                    let r = c.post(server.url("/v1/fit/batch")).json(body).send().unwrap();
+                    let r = c
+                        .post(server.url("/v1/fit/batch"))
+                        .json(body)
+                        .send()
+                        .unwrap();
                     let retry = r
                         .headers()
                         .get("retry-after")

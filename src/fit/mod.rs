@@ -46,8 +46,8 @@ pub use options::{
 use prepare::{Prepared, StartSet, half_extents_about, prepare};
 use report::misfit_warning;
 pub use report::{
-    BackendOut, FitReport, Iterations, PRECISE_MISFIT_WARNING, PointsOut, PoseOut, Quality, Timing,
-    parse_report_json, quality,
+    BackendOut, FitReport, Iterations, PRECISE_MISFIT_WARNING, PointsOut, PoseOut, Quality,
+    SearchOut, Timing, parse_report_json, quality,
 };
 pub use search::polish::{
     MISFIT_OVER_SCATTER, OFF_ITS_POINTS_WARNING, POLISH_POINTS, PRECISE_MISFIT,
@@ -633,6 +633,8 @@ fn report(
             polish: None,
             isolated: 0,
         },
+        // set by the search
+        search: None,
         warnings,
         fitted: (shape, pose),
         free_space_violation: (!p.stage2_free.is_empty())

@@ -88,6 +88,24 @@ fn is_zero(n: &usize) -> bool {
     *n == 0
 }
 
+/// What the search tried and what it kept (the default method): the starts of its broad
+/// set, the candidates round 1 kept in distinct basins, those round 2 refined and by
+/// which estimator, the finalists that converged; for a cloud read two ways (a view
+/// from its frame's origin, and from nowhere), how far the reading not taken went.
+#[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
+pub struct SearchOut {
+    pub starts: usize,
+    pub kept: usize,
+    pub refined: usize,
+    /// `likelihood` (a noisy cloud) or `least_squares` (a precise one)
+    pub estimator: String,
+    pub finalists: usize,
+    /// the other reading of an inferred view: `round 1`, `round 2` (dropped after it,
+    /// plainly less likely) or `finalists` (searched to the end, less likely)
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub other_reading_went_to: Option<String>,
+}
+
 /// The result of `supertoroid fit` (and of the service), documented in the README.
 #[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct FitReport {
@@ -103,6 +121,9 @@ pub struct FitReport {
     /// the viewpoint the fit used, where it came from and why
     pub viewpoint: super::ViewpointUsed,
     pub points: PointsOut,
+    /// what the search tried and kept; absent for `method=paper`
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub search: Option<SearchOut>,
     /// what the caller should know about this fit (e.g. a viewpoint that was ignored);
     /// absent when there is nothing
     #[serde(skip_serializing_if = "Vec::is_empty")]

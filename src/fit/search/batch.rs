@@ -78,16 +78,23 @@ fn fit_batch_searched(
             .expect("an inferred viewpoint");
         let test = ViewTest::new(clouds[*i].0, viewpoint, options.stage2_points);
         // (negative log-likelihoods: lower is likelier)
-        let all_round = match (dropped[*i], dropped[clouds.len() + k]) {
-            (true, _) => true,
-            (_, true) => false,
+        let (view_stopped, other_stopped) = (dropped[*i], dropped[clouds.len() + k]);
+        let all_round = match (view_stopped, other_stopped) {
+            (Some(_), _) => true,
+            (_, Some(_)) => false,
             _ => test.score(&other, false) < test.score(view, true),
         };
-        if all_round {
+        let (mut taken, went_to) = if all_round {
             resolved[*i].0.viewpoint = Viewpoint::None;
             resolved[*i].1 = resolved[*i].1.dropped(ALL_ROUND);
-            results[*i] = Ok(other);
+            (other, view_stopped)
+        } else {
+            (view.clone(), other_stopped)
+        };
+        if let Some(search) = &mut taken.search {
+            search.other_reading_went_to = Some(went_to.unwrap_or("finalists").into());
         }
+        results[*i] = Ok(taken);
     }
     // a given viewpoint the fit contradicts goes: those clouds again without it
     let contradicted: Vec<(usize, f64)> = results
@@ -140,14 +147,15 @@ fn fit_batch_searched(
 
 /// Every cloud prepared, grouped by solver settings, searched and reported; `twins` are
 /// pairs of clouds that are one cloud in two readings (see [`TWIN_MARGIN`]).
-/// With the clouds whose search went no further than round 2 for their twin.
+/// With the round each cloud's search went no further than for its twin (None: to the
+/// end).
 #[allow(clippy::type_complexity)]
 fn searched_once(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
     twins: &[(usize, usize)],
-) -> Result<(Vec<Result<FitReport, FitError>>, Vec<bool>), FitError> {
-    let mut dropped = vec![false; clouds.len()];
+) -> Result<(Vec<Result<FitReport, FitError>>, Vec<Option<&'static str>>), FitError> {
+    let mut dropped = vec![None; clouds.len()];
     let start = Instant::now();
     let mut results: Vec<Option<Result<FitReport, FitError>>> =
         (0..clouds.len()).map(|_| None).collect();
@@ -172,7 +180,7 @@ fn searched_once(
             .collect();
         let found = search_group(evaluator, &group, &local_twins)?;
         for ((i, p), f) in group.iter().zip(found) {
-            dropped[*i] = f.dropped;
+            dropped[*i] = f.stopped_after;
             let best = &f.best;
             let mut r = report(
                 p,
@@ -188,6 +196,7 @@ fn searched_once(
             r.warnings.extend(polish::off_its_points(&r, || {
                 p.scatter().map(|s| s * p.norm.scale)
             }));
+            r.search = Some(f.tried);
             r.timing_ms = Timing {
                 stage1: f.round1_ms,
                 stage2: f.round2_ms + f.finalists_ms,

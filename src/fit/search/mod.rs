@@ -273,8 +273,9 @@ pub(super) struct Found {
     pub round1_ms: f64,
     pub round2_ms: f64,
     pub finalists_ms: f64,
-    /// its twin's reading was plainly more likely: it went no further than round 2
-    pub dropped: bool,
+    /// its twin's reading was plainly more likely: the round it went no further than
+    pub stopped_after: Option<&'static str>,
+    pub tried: SearchOut,
 }
 
 /// The search for every cloud of a group (clouds with one solver setting): round 1,
@@ -294,13 +295,13 @@ pub(super) fn search_group(
     );
     let t1 = t0.elapsed();
 
-    let round2 = rounds::round2(evaluator, group, &first)?;
+    let (round2, noisy_clouds) = rounds::round2(evaluator, group, &first)?;
     let t2 = t0.elapsed();
 
     // Twins (one cloud read as a view and as a view from nowhere): the reading whose best
     // candidate is plainly less likely than the other's goes no further.
     let best2: Vec<Scored> = round2.iter().map(|r| choose(r)).collect();
-    let mut dropped = first.dropped;
+    let mut dropped = first.dropped.clone();
     drop_less_likely_readings(
         twins,
         |cloud| Some(best2[cloud].score),
@@ -308,19 +309,40 @@ pub(super) fn search_group(
         &mut dropped,
     );
 
-    let best = rounds::finalists(group, &round2, &best2, &first.all_round, &dropped);
+    let finalists = rounds::finalists(group, &round2, &best2, &first.all_round, &dropped);
     let t3 = t0.elapsed();
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
-    Ok(best
+    Ok(finalists
         .into_iter()
         .enumerate()
-        .map(|(cloud, best)| Found {
+        .map(|(cloud, (best, converged))| Found {
             best,
             stage1_iterations: first.stage1_iterations[cloud],
             round1_ms: ms(t1),
             round2_ms: ms(t2 - t1),
             finalists_ms: ms(t3 - t2),
-            dropped: dropped[cloud],
+            stopped_after: if first.dropped[cloud] {
+                Some("round 1")
+            } else {
+                dropped[cloud].then_some("round 2")
+            },
+            tried: SearchOut {
+                starts: group[cloud].1.starts.len(),
+                kept: first.kept[cloud].len(),
+                refined: if first.dropped[cloud] {
+                    0
+                } else {
+                    round2[cloud].len()
+                },
+                estimator: if noisy_clouds[cloud] {
+                    "likelihood"
+                } else {
+                    "least_squares"
+                }
+                .into(),
+                finalists: converged,
+                other_reading_went_to: None,
+            },
         })
         .collect())
 }

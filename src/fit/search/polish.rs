@@ -101,6 +101,7 @@ pub(super) fn polish(
             polish: Some(p.stage2_pts.len()),
             ..fitted.points.clone()
         };
+        polished.search = fitted.search.clone();
         *result = Ok(polished);
     }
 }

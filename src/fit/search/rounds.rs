@@ -139,12 +139,13 @@ fn sample_of(p: &Prepared, points: &[DVec3], all_round: bool) -> Sample {
 /// refined by the estimator the cloud's noise calls for (one estimator for all of a
 /// cloud's candidates, chosen on its likeliest one: candidates are compared by one
 /// measure), scored on [`ROUND2_POINTS`] of the stage-2 sample. A dropped reading keeps
-/// round 1's candidates.
+/// round 1's candidates. With each cloud's estimator: the likelihood (true) or least
+/// squares.
 pub(super) fn round2(
     evaluator: &mut dyn Evaluator,
     group: &[(usize, Prepared)],
     first: &Round1,
-) -> Result<Vec<Vec<Scored>>, FitError> {
+) -> Result<(Vec<Vec<Scored>>, Vec<bool>), FitError> {
     let sets2: Vec<PointSet> = group.iter().map(|(_, p)| p.stage2_set()).collect();
     evaluator.set_point_sets_with_free_space(&sets2)?;
     let mids: Vec<Sample> = group
@@ -207,7 +208,7 @@ pub(super) fn round2(
                 refine_noisy(evaluator, p, cloud, &first.kept[cloud], &mids[cloud], noise)?;
         }
     }
-    Ok(round2)
+    Ok((round2, noise.iter().map(Option::is_some).collect()))
 }
 
 /// Round 2 of the `precise` clouds: least squares on the stage-2 sample, every
@@ -307,21 +308,22 @@ fn refine_noisy(
 /// Each cloud's fit: its likeliest round-2 candidate, converged on the stage-2 sample
 /// where the likelihood refined it (a runner-up within [`CLOSE_MARGIN`] converges too,
 /// and the likelier of the two stands: the two readings of a top view are often that
-/// close). The polish then takes it on more of the cloud's points.
+/// close). The polish then takes it on more of the cloud's points. With the number of
+/// finalists converged.
 pub(super) fn finalists(
     group: &[(usize, Prepared)],
     round2: &[Vec<Scored>],
     best2: &[Scored],
     all_round: &[bool],
     dropped: &[bool],
-) -> Vec<Scored> {
+) -> Vec<(Scored, usize)> {
     group
         .iter()
         .enumerate()
         .map(|(cloud, (_, p))| {
             let best = best2[cloud];
             if !best.modelled || dropped[cloud] {
-                return best;
+                return (best, 0);
             }
             let close: Vec<Scored> = round2[cloud]
                 .iter()
@@ -334,7 +336,7 @@ pub(super) fn finalists(
                 .map(|c| converge(p, &sample, c, REFINE_ITERATIONS))
                 .collect();
             converged.sort_by(|a, b| a.rank(b));
-            converged.first().copied().unwrap_or(best)
+            (converged.first().copied().unwrap_or(best), converged.len())
         })
         .collect()
 }
