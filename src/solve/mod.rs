@@ -256,46 +256,14 @@ pub fn solve_on(
         .into_iter()
         .zip(first)
         .zip(bounds)
-        .map(|((c, c0), bounds)| {
-            // initial barrier weight: small against the cost, and the duals on the central path
-            let mu = 1e-3 * c0.cost.max(1e-12) / 12.0;
-            let v = c.shape.to_array();
-            let mut z_lower = [0.0; 6];
-            let mut z_upper = [0.0; 6];
-            for i in 0..6 {
-                z_lower[i] = mu / (v[i] - bounds.lower[i]);
-                z_upper[i] = mu / (bounds.upper[i] - v[i]);
-            }
-            State {
-                c,
-                bounds: *bounds,
-                z_lower,
-                z_upper,
-                mu,
-                damping: 1e-3,
-                normal: c0,
-                iterations: 0,
-                small_changes: 0,
-                stop: None,
-                log: Vec::new(),
-            }
-        })
+        .map(|((c, c0), bounds)| State::at(c, c0, *bounds))
         .collect();
     // for each start stopped by merging, the start it met
     let mut merged_into: Vec<Option<usize>> = vec![None; states.len()];
 
     for iteration in 0..o.max_iterations {
         if o.prune_after > 0 && iteration == o.prune_after && states.len() > 1 {
-            let mut best = std::collections::HashMap::<usize, f64>::new();
-            for (s, &set) in states.iter().zip(sets) {
-                let b = best.entry(set).or_insert(f64::INFINITY);
-                *b = b.min(s.normal.cost);
-            }
-            for (s, set) in states.iter_mut().zip(sets) {
-                if s.stop.is_none() && s.normal.cost > o.prune_ratio * best[set] {
-                    s.stop = Some(Stop::Pruned);
-                }
-            }
+            prune(&mut states, sets, o.prune_ratio);
         }
         if o.merge_tolerance > 0.0 {
             merge_close_starts(&mut states, sets, o.merge_tolerance, &mut merged_into);
@@ -308,71 +276,17 @@ pub fn solve_on(
         }
         // Newton systems for every active start, then damping retries until each either
         // finds a decrease of its merit or gives up.
-        let mut pending: Vec<(usize, Mat12, Vec12)> = Vec::new();
-        for &i in &active {
-            let s = &mut states[i];
-            let ne = &s.normal;
-            let bounds = s.bounds;
-            s.iterations += 1;
-            let mut h = Mat12::from_fn(|a, b| ne.jtj[a][b]);
-            let unseen = unseen_directions(&ne.jtj);
-            let mut g = Vec12::from_fn(|a, _| ne.jtr[a]);
-            for k in 0..6 {
-                g[k] += o.shape_prior[k] * ne.count as f64;
-            }
-            let v = s.c.shape.to_array();
-            for k in 0..6 {
-                let (dl, du) = (v[k] - bounds.lower[k], bounds.upper[k] - v[k]);
-                g[k] += -s.mu / dl + s.mu / du;
-                h[(k, k)] += s.z_lower[k] / dl + s.z_upper[k] / du;
-            }
-            for k in 0..NUM_PARAMS {
-                if o.fixed[k] || unseen[k] {
-                    g[k] = 0.0;
-                    for j in 0..NUM_PARAMS {
-                        h[(k, j)] = 0.0;
-                        h[(j, k)] = 0.0;
-                    }
-                    h[(k, k)] = 1.0;
-                }
-            }
-            let gmax = g.amax();
-            if gmax <= o.gradient_tolerance * ne.cost.max(1e-300)
-                && s.mu < 1e-10 * ne.cost.max(1e-300)
-            {
-                s.stop = Some(Stop::SmallGradient);
-                continue;
-            }
-            pending.push((i, h, g));
-        }
+        let mut pending: Vec<(usize, Mat12, Vec12)> = active
+            .into_iter()
+            .filter_map(|i| newton_system(&mut states[i], o).map(|(h, g)| (i, h, g)))
+            .collect();
         let mut tries = 0;
         while !pending.is_empty() && tries < 8 {
             tries += 1;
-            let mut trials = Vec::new();
-            for (i, h, g) in &pending {
-                let s = &states[*i];
-                let bounds = s.bounds;
-                let mut damped = *h;
-                for k in 0..NUM_PARAMS {
-                    damped[(k, k)] += s.damping * h[(k, k)].max(1e-12);
-                }
-                let step = damped
-                    .cholesky()
-                    .map(|ch| ch.solve(&(-g)))
-                    .unwrap_or_else(|| -g / (h.diagonal().amax().max(1e-12) * (1.0 + s.damping)));
-                // fraction to the boundary: keep 0.5% of the distance to every bound
-                let v = s.c.shape.to_array();
-                let mut alpha: f64 = 1.0;
-                for k in 0..6 {
-                    if step[k] < 0.0 {
-                        alpha = alpha.min(-0.995 * (v[k] - bounds.lower[k]) / step[k]);
-                    } else if step[k] > 0.0 {
-                        alpha = alpha.min(0.995 * (bounds.upper[k] - v[k]) / step[k]);
-                    }
-                }
-                let step: [f64; NUM_PARAMS] = std::array::from_fn(|k| alpha * step[k]);
-                trials.push((apply_step(&s.c, &step), step));
-            }
+            let trials: Vec<(Candidate, [f64; NUM_PARAMS])> = pending
+                .iter()
+                .map(|(i, h, g)| damped_trial(&states[*i], h, g))
+                .collect();
             let trial_sets: Vec<usize> = pending.iter().map(|p| sets[p.0]).collect();
             let trial_normals = evaluator.normal_equations_on(
                 &trials.iter().map(|t| t.0).collect::<Vec<_>>(),
@@ -381,53 +295,8 @@ pub fn solve_on(
             )?;
             let mut still = Vec::new();
             for ((entry, (trial, step)), tc) in pending.into_iter().zip(trials).zip(trial_normals) {
-                let i = entry.0;
-                let s = &mut states[i];
-                let bounds = s.bounds;
-                let (cost, count) = (s.normal.cost, s.normal.count);
-                let before = merit(cost, count, &s.c.shape, &bounds, s.mu, o);
-                let after = merit(tc.cost, tc.count, &trial.shape, &bounds, s.mu, o);
-                let step_norm = step.iter().map(|x| x * x).sum::<f64>().sqrt();
-                if after.is_finite() && tc.count == count && after <= before {
-                    // dual update towards the central path of the current mu, then a
-                    // smaller mu from the complementarity that was reached
-                    let v = trial.shape.to_array();
-                    let mut gap = 0.0;
-                    for k in 0..6 {
-                        let (dl, du) = (v[k] - bounds.lower[k], bounds.upper[k] - v[k]);
-                        s.z_lower[k] = (s.mu / dl).max(1e-300);
-                        s.z_upper[k] = (s.mu / du).max(1e-300);
-                        gap += s.z_lower[k] * dl + s.z_upper[k] * du;
-                    }
-                    let relative = (cost - tc.cost).abs() / cost.max(1e-300);
-                    s.c = trial;
-                    s.mu = (0.1 * gap / 12.0).max(1e-14 * tc.cost.max(1e-300));
-                    s.normal = tc;
-                    s.damping = (s.damping / 3.0).max(1e-9);
-                    s.log.push(LogLine {
-                        iteration: s.iterations,
-                        cost: s.normal.cost,
-                        mu: s.mu,
-                        damping: s.damping,
-                        step: step_norm,
-                    });
-                    s.small_changes = if relative < o.cost_tolerance {
-                        s.small_changes + 1
-                    } else {
-                        0
-                    };
-                    if s.small_changes >= 2 {
-                        s.stop = Some(Stop::CostChange);
-                    } else if step_norm < o.step_tolerance {
-                        s.stop = Some(Stop::SmallStep);
-                    }
-                } else {
-                    s.damping *= 10.0;
-                    if s.damping > 1e10 || step_norm < o.step_tolerance {
-                        s.stop = Some(Stop::NoProgress);
-                    } else {
-                        still.push(entry);
-                    }
+                if !states[entry.0].take_or_damp(trial, &step, tc, o) {
+                    still.push(entry);
                 }
             }
             pending = still;
@@ -447,8 +316,177 @@ pub fn solve_on(
             log: s.log,
         })
         .collect();
+    follow_merges(&mut solutions, &merged_into);
+    Ok(solutions)
+}
+
+impl State {
+    /// A start at `c` (inside its `bounds`) with its normal equations `c0`: the barrier
+    /// weight small against the cost, the duals on the central path.
+    fn at(c: Candidate, c0: NormalEquations, bounds: Bounds) -> Self {
+        let mu = 1e-3 * c0.cost.max(1e-12) / 12.0;
+        let v = c.shape.to_array();
+        let mut z_lower = [0.0; 6];
+        let mut z_upper = [0.0; 6];
+        for i in 0..6 {
+            z_lower[i] = mu / (v[i] - bounds.lower[i]);
+            z_upper[i] = mu / (bounds.upper[i] - v[i]);
+        }
+        State {
+            c,
+            bounds,
+            z_lower,
+            z_upper,
+            mu,
+            damping: 1e-3,
+            normal: c0,
+            iterations: 0,
+            small_changes: 0,
+            stop: None,
+            log: Vec::new(),
+        }
+    }
+
+    /// Takes the trial `trial` (reached by `step`, its normal equations `tc`) where it
+    /// lowers the barrier merit, updating the duals and mu; else raises the damping.
+    /// Whether the start is done with this iteration (stepped or stopped).
+    fn take_or_damp(
+        &mut self,
+        trial: Candidate,
+        step: &[f64; NUM_PARAMS],
+        tc: NormalEquations,
+        o: &SolverOptions,
+    ) -> bool {
+        let s = self;
+        let bounds = s.bounds;
+        let (cost, count) = (s.normal.cost, s.normal.count);
+        let before = merit(cost, count, &s.c.shape, &bounds, s.mu, o);
+        let after = merit(tc.cost, tc.count, &trial.shape, &bounds, s.mu, o);
+        let step_norm = step.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if !(after.is_finite() && tc.count == count && after <= before) {
+            s.damping *= 10.0;
+            if s.damping > 1e10 || step_norm < o.step_tolerance {
+                s.stop = Some(Stop::NoProgress);
+                return true;
+            }
+            return false;
+        }
+        // dual update towards the central path of the current mu, then a smaller mu from
+        // the complementarity that was reached
+        let v = trial.shape.to_array();
+        let mut gap = 0.0;
+        for k in 0..6 {
+            let (dl, du) = (v[k] - bounds.lower[k], bounds.upper[k] - v[k]);
+            s.z_lower[k] = (s.mu / dl).max(1e-300);
+            s.z_upper[k] = (s.mu / du).max(1e-300);
+            gap += s.z_lower[k] * dl + s.z_upper[k] * du;
+        }
+        let relative = (cost - tc.cost).abs() / cost.max(1e-300);
+        s.c = trial;
+        s.mu = (0.1 * gap / 12.0).max(1e-14 * tc.cost.max(1e-300));
+        s.normal = tc;
+        s.damping = (s.damping / 3.0).max(1e-9);
+        s.log.push(LogLine {
+            iteration: s.iterations,
+            cost: s.normal.cost,
+            mu: s.mu,
+            damping: s.damping,
+            step: step_norm,
+        });
+        s.small_changes = if relative < o.cost_tolerance {
+            s.small_changes + 1
+        } else {
+            0
+        };
+        if s.small_changes >= 2 {
+            s.stop = Some(Stop::CostChange);
+        } else if step_norm < o.step_tolerance {
+            s.stop = Some(Stop::SmallStep);
+        }
+        true
+    }
+}
+
+/// Stops the starts of each point set whose cost is over `ratio` times the set's best.
+fn prune(states: &mut [State], sets: &[usize], ratio: f64) {
+    let mut best = std::collections::HashMap::<usize, f64>::new();
+    for (s, &set) in states.iter().zip(sets) {
+        let b = best.entry(set).or_insert(f64::INFINITY);
+        *b = b.min(s.normal.cost);
+    }
+    for (s, set) in states.iter_mut().zip(sets) {
+        if s.stop.is_none() && s.normal.cost > ratio * best[set] {
+            s.stop = Some(Stop::Pruned);
+        }
+    }
+}
+
+/// The Newton system (H, g) of a running start: Gauss-Newton from its normal equations,
+/// the shape prior, the log-barrier's terms, held and unseen parameters taken out. None
+/// (the start stopped) where its gradient and barrier weight are both negligible.
+fn newton_system(s: &mut State, o: &SolverOptions) -> Option<(Mat12, Vec12)> {
+    let ne = &s.normal;
+    let bounds = s.bounds;
+    s.iterations += 1;
+    let mut h = Mat12::from_fn(|a, b| ne.jtj[a][b]);
+    let unseen = unseen_directions(&ne.jtj);
+    let mut g = Vec12::from_fn(|a, _| ne.jtr[a]);
+    for k in 0..6 {
+        g[k] += o.shape_prior[k] * ne.count as f64;
+    }
+    let v = s.c.shape.to_array();
+    for k in 0..6 {
+        let (dl, du) = (v[k] - bounds.lower[k], bounds.upper[k] - v[k]);
+        g[k] += -s.mu / dl + s.mu / du;
+        h[(k, k)] += s.z_lower[k] / dl + s.z_upper[k] / du;
+    }
+    for k in 0..NUM_PARAMS {
+        if o.fixed[k] || unseen[k] {
+            g[k] = 0.0;
+            for j in 0..NUM_PARAMS {
+                h[(k, j)] = 0.0;
+                h[(j, k)] = 0.0;
+            }
+            h[(k, k)] = 1.0;
+        }
+    }
+    let gmax = g.amax();
+    if gmax <= o.gradient_tolerance * ne.cost.max(1e-300) && s.mu < 1e-10 * ne.cost.max(1e-300) {
+        s.stop = Some(Stop::SmallGradient);
+        return None;
+    }
+    Some((h, g))
+}
+
+/// The damped step of a start from its system (h, g), cut by the fraction to the
+/// boundary (0.5% of the distance to every bound kept), and where it lands.
+fn damped_trial(s: &State, h: &Mat12, g: &Vec12) -> (Candidate, [f64; NUM_PARAMS]) {
+    let bounds = s.bounds;
+    let mut damped = *h;
+    for k in 0..NUM_PARAMS {
+        damped[(k, k)] += s.damping * h[(k, k)].max(1e-12);
+    }
+    let step = damped
+        .cholesky()
+        .map(|ch| ch.solve(&(-g)))
+        .unwrap_or_else(|| -g / (h.diagonal().amax().max(1e-12) * (1.0 + s.damping)));
+    let v = s.c.shape.to_array();
+    let mut alpha: f64 = 1.0;
+    for k in 0..6 {
+        if step[k] < 0.0 {
+            alpha = alpha.min(-0.995 * (v[k] - bounds.lower[k]) / step[k]);
+        } else if step[k] > 0.0 {
+            alpha = alpha.min(0.995 * (bounds.upper[k] - v[k]) / step[k]);
+        }
+    }
+    let step: [f64; NUM_PARAMS] = std::array::from_fn(|k| alpha * step[k]);
+    (apply_step(&s.c, &step), step)
+}
+
+/// Each start that merged into another reports the solution of the one that ran on (a
+/// start may have met one that met another later: followed to the end).
+fn follow_merges(solutions: &mut [Solution], merged_into: &[Option<usize>]) {
     for i in 0..solutions.len() {
-        // a start may have met one that met another later: follow to the one that ran on
         let mut j = i;
         while let Some(k) = merged_into[j] {
             j = k;
@@ -460,7 +498,6 @@ pub fn solve_on(
             (s.candidate, s.cost, s.count) = (candidate, cost, count);
         }
     }
-    Ok(solutions)
 }
 
 /// Stops every running start that has come within `tolerance` of another running start
