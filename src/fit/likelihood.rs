@@ -43,7 +43,7 @@ pub(crate) mod visibility;
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};
 use crate::solve::Bounds;
-use crate::solve::likelihood::{Held, LikelihoodProblem, Matrix, Stopping, Vector, minimise};
+use crate::solve::likelihood::{LikelihoodProblem, Matrix, Stopping, Vector, minimise};
 use glam::{DQuat, DVec3};
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
@@ -81,28 +81,7 @@ pub const MAX_ITERATIONS: usize = 30;
 /// rotation, ln sigma.
 const N: usize = PARAMETERS;
 
-/// What the caller holds fixed and where the shape may go.
-#[derive(Clone, Copy, Debug)]
-pub struct Limits {
-    /// the shape's box (normalised units); a4 stays above 1 besides
-    pub bounds: Bounds,
-    /// shape parameters held at their starting values (the caller's known dimensions)
-    pub fixed_shape: [bool; 6],
-    /// the hole axis is known: the rotation may only turn about it
-    pub fixed_axis: bool,
-}
-
-/// The refined candidate and the noise sigma the model found (both normalised units),
-/// with the iterations taken.
-#[derive(Clone, Copy, Debug)]
-pub struct Refined {
-    pub candidate: Candidate,
-    pub sigma: f64,
-    pub iterations: usize,
-    /// the negative mean log-likelihood of the points at the refined parameters (lower
-    /// is better; comparable between refinements of the same points)
-    pub objective: f64,
-}
+pub use super::objective::{Limits, Refined};
 
 /// The smallest and largest coordinates of `points`.
 fn bounding_box(points: &[DVec3]) -> (DVec3, DVec3) {
@@ -697,18 +676,12 @@ fn refine_problem(
         bounds: limits.bounds,
         sigma,
     };
-    let mut held = [false; N];
-    held[..6].copy_from_slice(&limits.fixed_shape);
-    let held = Held {
-        parameters: held,
-        axis: limits.fixed_axis.then(|| start.pose.axis()),
-    };
     let stopping = Stopping {
         max_iterations,
         decrease: STOP_DECREASE,
         step: 1e-6,
     };
-    let minimum = minimise(&mut problem, x, &held, &stopping);
+    let minimum = minimise(&mut problem, x, &limits.held(start), &stopping);
     let x = minimum.x;
     let shape = Shape::new(x[0], x[1], x[2], x[3], x[4], x[5]);
     let pose = Pose::new(

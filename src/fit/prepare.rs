@@ -465,18 +465,9 @@ impl Prepared<'_> {
         bounds
     }
 
-    /// What the noise model may move from `start`: the supported box, the known shape
-    /// parameters and the known axis held.
-    pub(super) fn likelihood_limits(&self, start: &Candidate) -> likelihood::Limits {
-        likelihood::Limits {
-            bounds: self.supported_bounds(start),
-            fixed_shape: self.known.map(|k| k.is_some()),
-            fixed_axis: self.known_axis,
-        }
-    }
-
-    /// What the likelihood may move from `start` ([`objective::Limits`]).
-    pub(super) fn objective_limits(&self, start: &Candidate) -> objective::Limits {
+    /// What the noise model may move from `start` ([`objective::Limits`]): the supported
+    /// box, the known shape parameters and the known axis held.
+    pub(super) fn likelihood_limits(&self, start: &Candidate) -> objective::Limits {
         objective::Limits {
             bounds: self.supported_bounds(start),
             fixed_shape: self.known.map(|k| k.is_some()),

@@ -8,7 +8,8 @@ use crate::eval::Candidate;
 use crate::solve::Bounds;
 use crate::solve::likelihood::{Held, LikelihoodProblem, Stopping, minimise};
 
-/// What the caller holds fixed and where the shape may go.
+/// What the caller holds fixed and where the shape may go (both noise models'
+/// refinements take it).
 #[derive(Clone, Copy, Debug)]
 pub struct Limits {
     pub bounds: Bounds,
@@ -18,8 +19,22 @@ pub struct Limits {
     pub fixed_axis: bool,
 }
 
+impl Limits {
+    /// What the solver holds, refining from `start`: the known shape parameters, and
+    /// with a known axis every turn but the one about the start's axis.
+    pub(crate) fn held(&self, start: &Candidate) -> Held {
+        let mut parameters = [false; PARAMETERS];
+        parameters[..6].copy_from_slice(&self.fixed_shape);
+        Held {
+            parameters,
+            axis: self.fixed_axis.then(|| start.pose.axis()),
+        }
+    }
+}
+
 /// The refined candidate and sigma (normalised units), the iterations taken, and the
-/// objective there.
+/// objective there: the negative mean log-likelihood of the points (lower is better;
+/// comparable between refinements of the same points).
 #[derive(Clone, Copy, Debug)]
 pub struct Refined {
     pub candidate: Candidate,
@@ -72,18 +87,12 @@ pub fn refine_on(
         sigma,
         holed: start.shape.a4 > 1.0,
     };
-    let mut held = [false; PARAMETERS];
-    held[..6].copy_from_slice(&limits.fixed_shape);
-    let held = Held {
-        parameters: held,
-        axis: limits.fixed_axis.then(|| start.pose.axis()),
-    };
     let stopping = Stopping {
         max_iterations,
         decrease: STOP_DECREASE,
         step: 1e-7,
     };
-    let minimum = minimise(&mut problem, x, &held, &stopping);
+    let minimum = minimise(&mut problem, x, &limits.held(start), &stopping);
     Refined {
         candidate: problem.objective.candidate(&minimum.x),
         sigma: minimum.x[12].exp(),

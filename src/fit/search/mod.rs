@@ -386,7 +386,7 @@ fn converge(p: &Prepared, sample: &Sample, best: Scored, iterations: usize) -> S
         &sample.data(),
         &best.candidate,
         best.sigma,
-        &p.objective_limits(&best.candidate),
+        &p.likelihood_limits(&best.candidate),
         iterations,
     );
     if collapsed(&r, best.sigma) {
@@ -453,7 +453,7 @@ fn likelihood_candidate(p: &Prepared, sample: &Sample, c: Scored, noise: f64) ->
         &sample.data(),
         &c.candidate,
         start,
-        &p.objective_limits(&c.candidate),
+        &p.likelihood_limits(&c.candidate),
         ROUND2_ITERATIONS,
         objective::normaliser::COARSE,
     );
