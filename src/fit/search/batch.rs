@@ -84,17 +84,19 @@ fn fit_batch_searched(
             (_, Some(_)) => false,
             _ => test.score(&other, false) < test.score(view, true),
         };
-        let (mut taken, went_to) = if all_round {
+        let went_to = if all_round {
             resolved[*i].0.viewpoint = Viewpoint::None;
             resolved[*i].1 = resolved[*i].1.dropped(ALL_ROUND);
-            (other, view_stopped)
+            results[*i] = Ok(other);
+            view_stopped
         } else {
-            (view.clone(), other_stopped)
+            other_stopped
         };
-        if let Some(search) = &mut taken.search {
+        if let Ok(taken) = &mut results[*i]
+            && let Some(search) = &mut taken.search
+        {
             search.other_reading_went_to = Some(went_to.unwrap_or("finalists").into());
         }
-        results[*i] = Ok(taken);
     }
     // a given viewpoint the fit contradicts goes: those clouds again without it
     let contradicted: Vec<(usize, f64)> = results
