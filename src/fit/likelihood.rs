@@ -43,7 +43,7 @@ pub(crate) mod visibility;
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};
 use crate::solve::Bounds;
-use crate::solve::likelihood::{LikelihoodProblem, Matrix, Stopping, Vector, minimise};
+use crate::solve::likelihood::{LikelihoodProblem, Matrix, Stopping, Vector, fold_turn, minimise};
 use glam::{DQuat, DVec3};
 use nalgebra::{SMatrix, SVector};
 use rayon::prelude::*;
@@ -722,10 +722,7 @@ impl LikelihoodProblem for Bounded<'_> {
         // the turn folds into the starting rotation (the gradient is the left
         // perturbation's at zero)
         let problem = &mut self.problem;
-        problem.rotation0 = problem.rotation(&x).normalize();
-        x[9] = 0.0;
-        x[10] = 0.0;
-        x[11] = 0.0;
+        problem.rotation0 = fold_turn(&mut x, problem.rotation0);
         problem.grid = regrid(
             problem.grid,
             grid_for(

@@ -290,32 +290,21 @@ fn normal_line_starts(
     let Some((axis, on_axis)) = line else {
         return (starts, across_starts);
     };
+    // each line's starts at three hole ratios (the first from the points' spread)
+    let on_line = |axis: DVec3, on: DVec3, hint: DVec3| {
+        [None, Some(1.3), Some(2.5)]
+            .map(|a4| starts::start_on_axis_line(axis_sample, axis, on, hint, a4))
+    };
     let hint = hint_across(axis, axes);
     let turned = DQuat::from_axis_angle(axis, std::f64::consts::FRAC_PI_4) * hint;
     for hint in [hint, turned] {
-        for a4 in [None, Some(1.3), Some(2.5)] {
-            starts.push(starts::start_on_axis_line(
-                axis_sample,
-                axis,
-                on_axis,
-                hint,
-                a4,
-            ));
-        }
+        starts.extend(on_line(axis, on_axis, hint));
     }
     if let Some(across) = starts::across_line_of_sight(axis, viewpoint)
         .filter(|_| start_set != StartSet::Usual && o.known_axis.is_none())
         && let Some(on_across) = starts::axis_point_for_direction(axis_sample, &normals, across)
     {
-        for a4 in [None, Some(1.3), Some(2.5)] {
-            across_starts.push(starts::start_on_axis_line(
-                axis_sample,
-                across,
-                on_across,
-                axis,
-                a4,
-            ));
-        }
+        across_starts.extend(on_line(across, on_across, axis));
     }
     (starts, across_starts)
 }

@@ -9,7 +9,7 @@
 //! accepted step the problem folds the turn into its reference ([`LikelihoodProblem::accept`]),
 //! so the turn starts from zero every iteration, as in the least-squares solver.
 
-use glam::DVec3;
+use glam::{DQuat, DVec3};
 use nalgebra::{SMatrix, SVector};
 
 /// The number of parameters (see the module docs).
@@ -27,6 +27,17 @@ pub trait LikelihoodProblem {
     /// Takes the accepted point `x` as the new reference (the turn folded into the
     /// rotation, the quadrature regridded) and returns it in the new reference's terms.
     fn accept(&mut self, x: Vector) -> Vector;
+}
+
+/// Folds the turn of `x` (parameters 9-11) into `rotation`, the reference it is applied
+/// on the left of, and sets it to zero: what a problem's [`LikelihoodProblem::accept`]
+/// does with its rotation. Returns the new reference.
+pub fn fold_turn(x: &mut Vector, rotation: DQuat) -> DQuat {
+    let folded = (DQuat::from_scaled_axis(DVec3::new(x[9], x[10], x[11])) * rotation).normalize();
+    x[9] = 0.0;
+    x[10] = 0.0;
+    x[11] = 0.0;
+    folded
 }
 
 /// When the loop stops.

@@ -6,7 +6,7 @@ use super::tables::Grid;
 use super::{Data, Matrix, Objective, PARAMETERS, Vector, parameters};
 use crate::eval::Candidate;
 use crate::solve::Bounds;
-use crate::solve::likelihood::{Held, LikelihoodProblem, Stopping, minimise};
+use crate::solve::likelihood::{Held, LikelihoodProblem, Stopping, fold_turn, minimise};
 
 /// What the caller holds fixed and where the shape may go (both noise models'
 /// refinements take it).
@@ -136,10 +136,7 @@ impl LikelihoodProblem for Boxed<'_> {
 
     fn accept(&mut self, mut x: Vector) -> Vector {
         let objective = &mut self.objective;
-        objective.rotation0 = objective.rotation(&x).normalize();
-        x[9] = 0.0;
-        x[10] = 0.0;
-        x[11] = 0.0;
+        objective.rotation0 = fold_turn(&mut x, objective.rotation0);
         objective.grid = Grid::for_shape(&Objective::shape(&x), x[12].exp());
         objective.hold(&x);
         x
