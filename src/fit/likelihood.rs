@@ -249,7 +249,11 @@ impl Buckets {
     /// Boxes at least `cut` wide, and no more than 64 along the longest side (a fine
     /// cutoff on a large shape would otherwise allocate millions of empty boxes).
     fn new(centres: &[DVec3], cut: f64) -> Self {
-        let (lo, hi) = bounding_box(centres);
+        Self::within(bounding_box(centres), centres, cut)
+    }
+
+    /// [`Buckets::new`] on the box `(lo, hi)`, which holds every centre.
+    fn within((lo, hi): (DVec3, DVec3), centres: &[DVec3], cut: f64) -> Self {
         let cell = cut.max((hi - lo).max_element() / 64.0);
         let span = ((hi - lo) / cell).floor();
         let dims = [span.x as i64 + 1, span.y as i64 + 1, span.z as i64 + 1];
@@ -308,8 +312,11 @@ impl Buckets {
 
 /// The surface grid at one parameter vector, in the normalised frame, with what the
 /// gradient needs: each cell's centre and area, and their derivatives in the six shape
-/// parameters (differences of the separable grid).
+/// parameters (differences of the separable grid). Only the cells of positive weight are
+/// kept (seen from a viewpoint, about half of them are hidden or face away, and add
+/// nothing to a point's density or its gradient); `bounds` is the box of all of them.
 struct Surface {
+    bounds: (DVec3, DVec3),
     cells: Vec<DVec3>,
     areas: Vec<f64>,
     /// per cell: d centre / d shape_k (world frame), k = 0..6
@@ -401,20 +408,25 @@ impl Problem<'_> {
         let view = self
             .viewpoint
             .map(|v| View::new(&cells, &areas, &world_normals, self.grid, v));
-        let weigh = |areas: Vec<f64>, cells: &[DVec3], normals: &[DVec3]| match &view {
-            Some(view) => view.weights(&areas, cells, normals, rotation),
+        let areas = match &view {
+            Some(view) => view.weights(&areas, &cells, &normals, rotation),
             None => areas,
         };
-        let areas = weigh(areas, &cells, &normals);
         let area: f64 = areas.iter().sum();
-        let m = cells.len();
+        let bounds = bounding_box(&cells);
+        let kept: Vec<usize> = match view {
+            Some(_) => (0..cells.len()).filter(|&j| areas[j] > 0.0).collect(),
+            None => (0..cells.len()).collect(),
+        };
+        let m = kept.len();
         let mut d_cells = Vec::new();
         let mut d_log_areas = Vec::new();
         let mut d_log_area = [0.0; 6];
         if with_derivatives {
             d_cells = vec![[DVec3::ZERO; 6]; m];
             d_log_areas = vec![[0.0; 6]; m];
-            // (the six moved surfaces are most of an evaluation's work: built in parallel)
+            // (the six moved surfaces are most of an evaluation's work: built in parallel,
+            // the kept cells' centres and weights alone)
             let moved: Vec<(f64, Vec<DVec3>, Vec<f64>)> = (0..6)
                 .into_par_iter()
                 .map(|k| {
@@ -422,19 +434,27 @@ impl Problem<'_> {
                     let step = 1e-6 * shape[k].abs().max(1e-2);
                     moved[k] += step;
                     let (canonical2, areas2, normals2) = surface_cells(&moved, rings, sectors);
-                    let areas2 = match view {
-                        Some(_) => weigh(areas2, &to_world(&canonical2), &normals2),
-                        None => areas2,
-                    };
+                    let areas2 = kept.iter().map(|&j| match &view {
+                        Some(view) => view.weight(
+                            j,
+                            areas2[j],
+                            rotation * canonical2[j] + translation,
+                            normals2[j],
+                            rotation,
+                        ),
+                        None => areas2[j],
+                    });
+                    let areas2 = areas2.collect();
+                    let canonical2 = kept.iter().map(|&j| canonical2[j]).collect();
                     (step, canonical2, areas2)
                 })
                 .collect();
             for (k, (step, canonical2, areas2)) in moved.into_iter().enumerate() {
                 d_log_area[k] = (areas2.iter().sum::<f64>() / area - 1.0) / step;
-                for j in 0..m {
-                    d_cells[j][k] = rotation * ((canonical2[j] - canonical[j]) / step);
-                    d_log_areas[j][k] =
-                        (areas2[j] - areas[j]) / (step * areas[j].max(f64::MIN_POSITIVE));
+                for (i, &j) in kept.iter().enumerate() {
+                    d_cells[i][k] = rotation * ((canonical2[i] - canonical[j]) / step);
+                    d_log_areas[i][k] =
+                        (areas2[i] - areas[j]) / (step * areas[j].max(f64::MIN_POSITIVE));
                 }
             }
         }
@@ -444,30 +464,30 @@ impl Problem<'_> {
             // w = area·|n·q| / |q|³ up to a constant, q = s - v. Moving the body by dt
             // moves q by dt; turning it by a left rotation vector dr moves q by
             // dr x (s - t) and n by dr x n, so n·q by dr·(n x (t - v)).
-            d_log_weights_pose = (0..m)
-                .map(|j| {
+            d_log_weights_pose = kept
+                .iter()
+                .map(|&j| {
                     let mut d = [0.0; 6];
-                    if areas[j] > 0.0 {
-                        let (n, q) = (world_normals[j], cells[j] - v);
-                        let (nq, q2) = (n.dot(q), q.length_squared());
-                        let by_turn = n.cross(translation - v) / nq
-                            - 3.0 * (cells[j] - translation).cross(q) / q2;
-                        let by_shift = n / nq - 3.0 * q / q2;
-                        d[..3].copy_from_slice(&by_shift.to_array());
-                        d[3..].copy_from_slice(&by_turn.to_array());
-                    }
+                    let (n, q) = (world_normals[j], cells[j] - v);
+                    let (nq, q2) = (n.dot(q), q.length_squared());
+                    let by_turn = n.cross(translation - v) / nq
+                        - 3.0 * (cells[j] - translation).cross(q) / q2;
+                    let by_shift = n / nq - 3.0 * q / q2;
+                    d[..3].copy_from_slice(&by_shift.to_array());
+                    d[3..].copy_from_slice(&by_turn.to_array());
                     d
                 })
                 .collect();
-            for (j, d) in d_log_weights_pose.iter().enumerate() {
+            for (&j, d) in kept.iter().zip(&d_log_weights_pose) {
                 for k in 0..6 {
                     d_log_area_pose[k] += areas[j] * d[k] / area;
                 }
             }
         }
         Surface {
-            cells,
-            areas,
+            bounds,
+            cells: kept.iter().map(|&j| cells[j]).collect(),
+            areas: kept.iter().map(|&j| areas[j]).collect(),
             d_cells,
             d_log_areas,
             d_log_area,
@@ -485,7 +505,7 @@ impl Problem<'_> {
         let translation = DVec3::new(x[6], x[7], x[8]);
         let surface = self.surface(x, with_gradient);
         let cut = self.cutoff * sigma;
-        let buckets = Buckets::new(&surface.cells, cut);
+        let buckets = Buckets::within(surface.bounds, &surface.cells, cut);
         let z = (std::f64::consts::TAU * sigma * sigma).powf(1.5);
         let inlier_scale = (1.0 - self.outlier_weight) / (surface.area * z);
         let half_inv_var = 0.5 / (sigma * sigma);

@@ -57,16 +57,26 @@ impl View {
         rotation: DQuat,
     ) -> Vec<f64> {
         (0..cells.len())
-            .map(|j| {
-                if !self.visible[j] {
-                    return 0.0;
-                }
-                let q = cells[j] - self.viewpoint;
-                let range2 = q.length_squared();
-                let cos = (rotation * normals[j]).dot(q).abs() / range2.sqrt();
-                areas[j] * cos * self.reference / range2
-            })
+            .map(|j| self.weight(j, areas[j], cells[j], normals[j], rotation))
             .collect()
+    }
+
+    /// [`View::weights`] of cell `j` alone.
+    pub(super) fn weight(
+        &self,
+        j: usize,
+        area: f64,
+        cell: DVec3,
+        normal: DVec3,
+        rotation: DQuat,
+    ) -> f64 {
+        if !self.visible[j] {
+            return 0.0;
+        }
+        let q = cell - self.viewpoint;
+        let range2 = q.length_squared();
+        let cos = (rotation * normal).dot(q).abs() / range2.sqrt();
+        area * cos * self.reference / range2
     }
 }
 
