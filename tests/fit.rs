@@ -1790,3 +1790,86 @@ fn the_report_says_what_the_search_tried_and_kept() {
             .is_none()
     );
 }
+
+/// docs/constants.md lists every numeric constant of `src/fit` and `src/solve/mod.rs` (the
+/// fit's tuning constants, in one place) under the file that defines it, with its value
+/// as written there; a constant added, removed, renamed or retuned without the table
+/// fails here.
+#[test]
+fn every_tuning_constant_of_the_fit_is_in_docs_constants_md() {
+    use std::collections::BTreeSet;
+    use std::path::{Path, PathBuf};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    fn sources(dir: &Path, out: &mut Vec<PathBuf>) {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                sources(&path, out);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                out.push(path);
+            }
+        }
+    }
+    let mut files = Vec::new();
+    sources(&root.join("src/fit"), &mut files);
+    files.push(root.join("src/solve/mod.rs"));
+    // module-level `[pub[(..)]] const NAME: TYPE = VALUE;` with a numeric VALUE
+    let numeric = |v: &str| {
+        v.chars()
+            .all(|c| c.is_ascii_digit() || ".e-+_[](), ".contains(c))
+    };
+    let mut in_sources = BTreeSet::new();
+    for file in &files {
+        let rel = file
+            .strip_prefix(root)
+            .unwrap()
+            .to_string_lossy()
+            .to_string();
+        for line in std::fs::read_to_string(file).unwrap().lines() {
+            let rest = [
+                "pub const ",
+                "pub(crate) const ",
+                "pub(super) const ",
+                "const ",
+            ]
+            .iter()
+            .find_map(|p| line.strip_prefix(p));
+            let Some((name, rest)) = rest.and_then(|r| r.split_once(':')) else {
+                continue;
+            };
+            let Some((_, value)) = rest.split_once(" = ") else {
+                continue;
+            };
+            let value = value.trim_end_matches(';');
+            if numeric(value) {
+                in_sources.insert((rel.clone(), name.to_string(), value.to_string()));
+            }
+        }
+    }
+    assert!(
+        in_sources.len() > 50,
+        "the scan found only {} constants",
+        in_sources.len()
+    );
+    let table = std::fs::read_to_string(root.join("docs/constants.md")).unwrap();
+    let mut in_table = BTreeSet::new();
+    let mut file = String::new();
+    for line in table.lines() {
+        if let Some(heading) = line.strip_prefix("## `") {
+            file = heading.trim_end_matches('`').to_string();
+        } else if let Some(row) = line.strip_prefix("| `") {
+            let cells: Vec<&str> = row.split(" | ").collect();
+            in_table.insert((
+                file.clone(),
+                cells[0].trim_end_matches('`').to_string(),
+                cells[1].trim_matches('`').to_string(),
+            ));
+        }
+    }
+    let missing: Vec<_> = in_sources.difference(&in_table).collect();
+    let stale: Vec<_> = in_table.difference(&in_sources).collect();
+    assert!(
+        missing.is_empty() && stale.is_empty(),
+        "docs/constants.md is out of date: not in it {missing:?}; not in the sources {stale:?}"
+    );
+}

@@ -3,6 +3,15 @@
 
 use super::*;
 
+/// The default of [`FitOptions::stage1_points`]: stage 1's sample.
+pub const STAGE1_POINTS: usize = 150;
+/// The default of [`FitOptions::stage2_points`]: stage 2's sample.
+pub const STAGE2_POINTS: usize = 1000;
+/// The default of [`FitOptions::huber`].
+pub const HUBER: f64 = 0.05;
+/// The default of [`FitOptions::refine_scale`].
+pub const REFINE_SCALE: f64 = 1.5;
+
 /// The a4 reward of the paper's procedure (its stage-2 term for a wider hole).
 pub const PAPER_A4_REWARD: f64 = 1e-4;
 
@@ -138,10 +147,10 @@ impl Default for FitOptions {
             method: Method::Default,
             model: Model::Supertoroid,
             seed: 0,
-            stage1_points: 150,
-            stage2_points: 1000,
-            huber: 0.05,
-            refine_scale: 1.5,
+            stage1_points: STAGE1_POINTS,
+            stage2_points: STAGE2_POINTS,
+            huber: HUBER,
+            refine_scale: REFINE_SCALE,
             eps_min: 0.1,
             eps_max: 2.0,
             known_axis: None,

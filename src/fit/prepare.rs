@@ -373,15 +373,14 @@ fn solver_options(o: &FitOptions, known: &[Option<f64>; 6]) -> (SolverOptions, S
     };
     let mut opts1 = SolverOptions {
         loss,
-        max_iterations: 40,
-        cost_tolerance: 1e-5,
-        prune_after: if paper { 0 } else { 4 },
-        prune_ratio: 1.5,
+        max_iterations: STAGE1_MAX_ITERATIONS,
+        cost_tolerance: STAGE1_COST_TOLERANCE,
+        prune_after: if paper { 0 } else { STAGE1_PRUNE_AFTER },
+        prune_ratio: STAGE1_PRUNE_RATIO,
         // starts that met in one basin run on as one (the paper clouds' stage 1 sends
         // two to five of its twelve starts into one basin)
         merge_tolerance: if paper { 0.0 } else { MERGE_TOLERANCE },
-        // normalised units (the cloud's RMS radius is 1): stage 2 polishes
-        step_tolerance: 1e-3,
+        step_tolerance: STAGE1_STEP_TOLERANCE,
         ..Default::default()
     };
     if o.known_axis.is_some() {
@@ -397,17 +396,33 @@ fn solver_options(o: &FitOptions, known: &[Option<f64>; 6]) -> (SolverOptions, S
         loss,
         shape_prior: [0.0, 0.0, 0.0, -a4_reward, 0.0, 0.0],
         fixed: opts1.fixed,
-        // steps of 1e-4 of the cloud's RMS radius no longer move the fit; near the end
-        // Gauss-Newton on a Huber loss converges only linearly, so this saves half the
-        // iterations
-        step_tolerance: 1e-4,
-        // a cap for the tail latency: the 24-case sweeps and the paper clouds gave the
-        // same successes and grades at 30 as at 60
-        max_iterations: 30,
+        step_tolerance: STAGE2_STEP_TOLERANCE,
+        max_iterations: STAGE2_MAX_ITERATIONS,
         ..Default::default()
     };
     (opts1, opts2)
 }
+
+/// Stage 1's least-squares iterations at most.
+pub const STAGE1_MAX_ITERATIONS: usize = 40;
+/// Stage 1 stops where the cost's relative decrease stays below this.
+pub const STAGE1_COST_TOLERANCE: f64 = 1e-5;
+/// Stage 1 stops the starts whose cost is over [`STAGE1_PRUNE_RATIO`] times the best
+/// one's after this many iterations.
+pub const STAGE1_PRUNE_AFTER: usize = 4;
+/// The multiple of the best start's cost over which stage 1 stops a start (after
+/// [`STAGE1_PRUNE_AFTER`] iterations).
+pub const STAGE1_PRUNE_RATIO: f64 = 1.5;
+/// Stage 1 stops where a step moves the fit by less than this (normalised units: the
+/// cloud's RMS radius is 1); stage 2 polishes.
+pub const STAGE1_STEP_TOLERANCE: f64 = 1e-3;
+/// Stage 2 stops where a step moves the fit by less than this (normalised units): such
+/// steps no longer move the fit, and near the end Gauss-Newton on a Huber loss converges
+/// only linearly, so this saves half the iterations.
+pub const STAGE2_STEP_TOLERANCE: f64 = 1e-4;
+/// Stage 2's iterations at most, a cap for the tail latency: the 24-case sweeps and the
+/// paper clouds gave the same successes and grades at 30 as at 60.
+pub const STAGE2_MAX_ITERATIONS: usize = 30;
 
 impl Prepared<'_> {
     /// Stage 1's point set: its sample and the free-space points in front of it.

@@ -210,7 +210,8 @@ pub fn across_line_of_sight(axis: DVec3, viewpoint: Option<DVec3>) -> Option<DVe
         .flatten()
 }
 
-/// See [`across_line_of_sight`]. The held-out view 60171 (noise-free, seen 75 degrees
+/// A normal lines' axis within this angle of the line of sight gets no second axis across
+/// it ([`across_line_of_sight`]). The held-out view 60171 (noise-free, seen 75 degrees
 /// off its hole axis) had its normal lines' axis 44 degrees from the line of sight.
 pub const ALONG_SIGHT_DEGREES: f64 = 25.0;
 

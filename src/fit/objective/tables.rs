@@ -20,8 +20,10 @@ pub const NODE_SIGMAS: f64 = 1.0;
 /// summed at spacing h sigmas misses its integral by 2·exp(-2 pi² / h²): 1e-8 at 1,
 /// 3e-4 at 1.5.)
 pub const SWEEP_SIGMAS: f64 = 1.5;
+/// The fewest and the most section nodes.
 const MIN_NODES: usize = 24;
 const MAX_NODES: usize = 720;
+/// The fewest and the most sweep samples.
 const MIN_SWEEP: usize = 48;
 const MAX_SWEEP: usize = 4096;
 

@@ -59,9 +59,10 @@ pub const REFINE_ITERATIONS: usize = 30;
 /// Likelihood iterations and points each round-2 candidate gets before the choice.
 pub const ROUND2_ITERATIONS: usize = 5;
 pub const ROUND2_POINTS: usize = 400;
-/// Iterations of the first round of the robust least squares, and what it adds for a
-/// candidate straight from round 1 (not yet converged).
+/// Iterations of the first round of the robust least squares.
 pub const ROBUST_FIRST_ITERATIONS: usize = 15;
+/// Iterations the first round adds for a candidate straight from round 1 (not yet
+/// converged).
 pub const ROUND1_SHORTFALL: usize = 15;
 /// A round-2 candidate within this of the best (mean log-likelihood per point) converges
 /// beside it before the choice.
