@@ -123,6 +123,17 @@ fn surface_cells(
     rings: usize,
     sectors: usize,
 ) -> (Vec<DVec3>, Vec<f64>, Vec<DVec3>) {
+    surface_cells_of(shape, rings, sectors, None)
+}
+
+/// [`surface_cells`] of the cells `of` alone (indices `ring * sectors + sector`), or of
+/// all.
+fn surface_cells_of(
+    shape: &[f64; 6],
+    rings: usize,
+    sectors: usize,
+    of: Option<&[usize]>,
+) -> (Vec<DVec3>, Vec<f64>, Vec<DVec3>) {
     use std::f64::consts::TAU;
     let [a1, a2, a3, a4, eps1, eps2] = *shape;
     let section: Vec<(f64, f64)> = (0..=rings)
@@ -136,27 +147,34 @@ fn surface_cells(
         let (cw, sw) = top[j];
         DVec3::new(a1 * (a4 + c) * cw, a2 * (a4 + c) * sw, a3 * z)
     };
-    let mut centres = Vec::with_capacity(rings * sectors);
-    let mut areas = Vec::with_capacity(rings * sectors);
-    let mut normals = Vec::with_capacity(rings * sectors);
-    for i in 0..rings {
-        for j in 0..sectors {
-            let (c00, c10) = (corner(i, j), corner(i + 1, j));
-            let (c01, c11) = (corner(i, j + 1), corner(i + 1, j + 1));
-            centres.push((c00 + c10 + c01 + c11) * 0.25);
-            let normal = (c11 - c00).cross(c10 - c01);
-            areas.push(0.5 * normal.length());
-            normals.push(normal.normalize_or_zero());
-        }
-    }
+    let cell = |i: usize, j: usize| {
+        let (c00, c10) = (corner(i, j), corner(i + 1, j));
+        let (c01, c11) = (corner(i, j + 1), corner(i + 1, j + 1));
+        let normal = (c11 - c00).cross(c10 - c01);
+        (
+            (c00 + c10 + c01 + c11) * 0.25,
+            0.5 * normal.length(),
+            normal.normalize_or_zero(),
+        )
+    };
     // outward normals (the grid's orientation is one for all cells: check the first,
     // whose outward direction is away from its section's centre on the x axis)
-    if let (Some(c), Some(n)) = (centres.first(), normals.first())
-        && n.dot(*c - DVec3::new(a1 * a4, 0.0, 0.0)) < 0.0
-    {
-        for n in &mut normals {
-            *n = -*n;
-        }
+    let (c, _, n) = cell(0, 0);
+    let inward = n.dot(c - DVec3::new(a1 * a4, 0.0, 0.0)) < 0.0;
+    let count = of.map_or(rings * sectors, <[usize]>::len);
+    let mut centres = Vec::with_capacity(count);
+    let mut areas = Vec::with_capacity(count);
+    let mut normals = Vec::with_capacity(count);
+    let mut push = |(centre, area, normal): (DVec3, f64, DVec3)| {
+        centres.push(centre);
+        areas.push(area);
+        normals.push(if inward { -normal } else { normal });
+    };
+    match of {
+        Some(of) => of
+            .iter()
+            .for_each(|&k| push(cell(k / sectors, k % sectors))),
+        None => (0..rings).for_each(|i| (0..sectors).for_each(|j| push(cell(i, j)))),
     }
     (centres, areas, normals)
 }
@@ -433,19 +451,21 @@ impl Problem<'_> {
                     let mut moved = shape;
                     let step = 1e-6 * shape[k].abs().max(1e-2);
                     moved[k] += step;
-                    let (canonical2, areas2, normals2) = surface_cells(&moved, rings, sectors);
-                    let areas2 = kept.iter().map(|&j| match &view {
-                        Some(view) => view.weight(
-                            j,
-                            areas2[j],
-                            rotation * canonical2[j] + translation,
-                            normals2[j],
-                            rotation,
-                        ),
-                        None => areas2[j],
-                    });
-                    let areas2 = areas2.collect();
-                    let canonical2 = kept.iter().map(|&j| canonical2[j]).collect();
+                    let (canonical2, areas2, normals2) = surface_cells_of(
+                        &moved,
+                        rings,
+                        sectors,
+                        view.as_ref().map(|_| kept.as_slice()),
+                    );
+                    let areas2 = match &view {
+                        Some(view) => (0..kept.len())
+                            .map(|i| {
+                                let cell = rotation * canonical2[i] + translation;
+                                view.weight(kept[i], areas2[i], cell, normals2[i], rotation)
+                            })
+                            .collect(),
+                        None => areas2,
+                    };
                     (step, canonical2, areas2)
                 })
                 .collect();

@@ -121,14 +121,18 @@ pub fn minimise(
                 let decrease = f - f_trial;
                 let step = trial - x;
                 x = problem.accept(trial);
-                (f, g, h) = problem.evaluate(&x, true);
                 lambda = (lambda / 3.0).max(1e-9);
                 small_steps = if decrease < stopping.decrease {
                     small_steps + 1
                 } else {
                     0
                 };
-                if small_steps >= 2 || step.norm() < stopping.step {
+                let last = small_steps >= 2
+                    || step.norm() < stopping.step
+                    || iterations == stopping.max_iterations;
+                // (the value in the new reference; a step no one takes needs no gradient)
+                (f, g, h) = problem.evaluate(&x, !last);
+                if last {
                     break;
                 }
             }
