@@ -758,20 +758,27 @@ impl LikelihoodProblem for Bounded<'_> {
         feasible.then_some(x)
     }
 
-    fn accept(&mut self, mut x: Vector) -> Vector {
+    fn accept(&mut self, mut x: Vector) -> (Vector, bool) {
         // the turn folds into the starting rotation (the gradient is the left
         // perturbation's at zero)
         let problem = &mut self.problem;
         problem.rotation0 = fold_turn(&mut x, problem.rotation0);
+        let grid = problem.grid;
         problem.grid = regrid(
-            problem.grid,
+            grid,
             grid_for(
                 &Problem::shape(&x),
                 x[12].exp(),
                 problem.section_cell_sigmas,
             ),
         );
-        x
+        (x, problem.grid == grid)
+    }
+
+    /// (the grid is kept on most steps ([`regrid`]), and the gradient at a trial is the
+    /// left perturbation's, as the folded reference's is)
+    fn trial_gradients(&self) -> bool {
+        true
     }
 }
 

@@ -25,8 +25,16 @@ pub trait LikelihoodProblem {
     /// rejected outright.
     fn admit(&self, x: Vector) -> Option<Vector>;
     /// Takes the accepted point `x` as the new reference (the turn folded into the
-    /// rotation, the quadrature regridded) and returns it in the new reference's terms.
-    fn accept(&mut self, x: Vector) -> Vector;
+    /// rotation, the quadrature regridded) and returns it in the new reference's terms,
+    /// and whether the problem there is the one `x` was evaluated on (nothing regridded or
+    /// held anew), so that the trial's evaluation stands for it.
+    fn accept(&mut self, x: Vector) -> (Vector, bool);
+    /// Whether trials are evaluated with their gradient: worth it where most accepted
+    /// trials' evaluations stand ([`LikelihoodProblem::accept`]), which then spares the
+    /// new reference's evaluation, at the cost of a gradient on each rejected trial.
+    fn trial_gradients(&self) -> bool {
+        false
+    }
 }
 
 /// Folds the turn of `x` (parameters 9-11) into `rotation`, the reference it is applied
@@ -115,12 +123,13 @@ pub fn minimise(
             break;
         };
         let trial = problem.admit(x + step);
-        let f_trial = trial.map_or(f64::INFINITY, |t| problem.evaluate(&t, false).0);
-        match trial {
-            Some(trial) if f_trial < f => {
-                let decrease = f - f_trial;
+        let evaluated = trial.map(|t| problem.evaluate(&t, problem.trial_gradients()));
+        match (trial, evaluated) {
+            (Some(trial), Some(evaluated)) if evaluated.0 < f => {
+                let decrease = f - evaluated.0;
                 let step = trial - x;
-                x = problem.accept(trial);
+                let stands;
+                (x, stands) = problem.accept(trial);
                 lambda = (lambda / 3.0).max(1e-9);
                 small_steps = if decrease < stopping.decrease {
                     small_steps + 1
@@ -131,7 +140,11 @@ pub fn minimise(
                     || step.norm() < stopping.step
                     || iterations == stopping.max_iterations;
                 // (the value in the new reference; a step no one takes needs no gradient)
-                (f, g, h) = problem.evaluate(&x, !last);
+                (f, g, h) = if stands && (last || problem.trial_gradients()) {
+                    evaluated
+                } else {
+                    problem.evaluate(&x, !last)
+                };
                 if last {
                     break;
                 }
@@ -177,21 +190,42 @@ mod tests {
 
     /// A Gaussian's negative mean log-likelihood in 13 independent parameters centred
     /// at `centre`: its minimum is the centre, its BHHH Hessian the identity.
+    /// With `trials`, its trials are evaluated with their gradient, whose evaluations
+    /// stand; it counts its evaluations with and without a gradient.
     struct Bowl {
         centre: Vector,
         lower: f64,
+        trials: bool,
+        evaluations: std::cell::Cell<[usize; 2]>,
+    }
+
+    impl Bowl {
+        fn new(centre: Vector, lower: f64) -> Self {
+            Self {
+                centre,
+                lower,
+                trials: false,
+                evaluations: Default::default(),
+            }
+        }
     }
 
     impl LikelihoodProblem for Bowl {
-        fn evaluate(&self, x: &Vector, _: bool) -> (f64, Vector, Matrix) {
+        fn evaluate(&self, x: &Vector, with_gradient: bool) -> (f64, Vector, Matrix) {
+            let mut counts = self.evaluations.get();
+            counts[usize::from(with_gradient)] += 1;
+            self.evaluations.set(counts);
             let d = x - self.centre;
             (0.5 * d.norm_squared(), d, Matrix::identity())
         }
         fn admit(&self, x: Vector) -> Option<Vector> {
             Some(x.map(|v| v.max(self.lower)))
         }
-        fn accept(&mut self, x: Vector) -> Vector {
-            x
+        fn accept(&mut self, x: Vector) -> (Vector, bool) {
+            (x, self.trials)
+        }
+        fn trial_gradients(&self) -> bool {
+            self.trials
         }
     }
 
@@ -206,10 +240,7 @@ mod tests {
     #[test]
     fn it_reaches_the_minimum_and_leaves_held_parameters_alone() {
         let centre = Vector::from_fn(|k, _| k as f64 * 0.1);
-        let mut bowl = Bowl {
-            centre,
-            lower: -10.0,
-        };
+        let mut bowl = Bowl::new(centre, -10.0);
         let mut held = [false; PARAMETERS];
         held[2] = true;
         let minimum = minimise(
@@ -234,10 +265,7 @@ mod tests {
     #[test]
     fn a_known_axis_turns_the_fit_about_it_alone() {
         let centre = Vector::from_fn(|k, _| if (9..12).contains(&k) { 0.3 } else { 0.0 });
-        let mut bowl = Bowl {
-            centre,
-            lower: -10.0,
-        };
+        let mut bowl = Bowl::new(centre, -10.0);
         let minimum = minimise(
             &mut bowl,
             Vector::zeros(),
@@ -254,7 +282,7 @@ mod tests {
     #[test]
     fn a_step_is_projected_where_the_problem_says() {
         let centre = Vector::from_element(-1.0);
-        let mut bowl = Bowl { centre, lower: 0.0 };
+        let mut bowl = Bowl::new(centre, 0.0);
         let minimum = minimise(
             &mut bowl,
             Vector::from_element(1.0),
@@ -268,5 +296,34 @@ mod tests {
             minimum.x.iter().all(|v| (v - 0.0).abs() < 1e-9),
             "{minimum:?}"
         );
+    }
+
+    #[test]
+    fn a_trials_evaluation_stands_where_the_problem_says_and_the_last_needs_no_gradient() {
+        let centre = Vector::from_fn(|k, _| k as f64 * 0.1);
+        let held = Held {
+            parameters: [false; PARAMETERS],
+            axis: None,
+        };
+        let mut minima = Vec::new();
+        for trials in [false, true] {
+            let mut bowl = Bowl::new(centre, -10.0);
+            bowl.trials = trials;
+            let minimum = minimise(&mut bowl, Vector::from_element(1.0), &held, &stopping());
+            assert!((minimum.x - centre).norm() < 1e-6, "{minimum:?}");
+            minima.push((minimum.iterations, bowl.evaluations.get()));
+        }
+        let [
+            (iterations, [values, gradients]),
+            (iterations_t, [values_t, gradients_t]),
+        ] = minima[..]
+        else {
+            unreachable!()
+        };
+        // one gradient per step taken and none after the last; each trial a value
+        assert_eq!(gradients, iterations);
+        assert_eq!(values, iterations + 1);
+        // with standing trials: the first point and each trial, all with a gradient
+        assert_eq!((values_t, gradients_t), (0, iterations_t + 1));
     }
 }

@@ -134,12 +134,12 @@ impl LikelihoodProblem for Boxed<'_> {
         Some(x)
     }
 
-    fn accept(&mut self, mut x: Vector) -> Vector {
+    fn accept(&mut self, mut x: Vector) -> (Vector, bool) {
         let objective = &mut self.objective;
         objective.rotation0 = fold_turn(&mut x, objective.rotation0);
         objective.grid = Grid::for_shape(&Objective::shape(&x), x[12].exp());
         objective.hold(&x);
-        x
+        (x, false)
     }
 }
 
