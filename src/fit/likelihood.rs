@@ -414,9 +414,10 @@ impl Problem<'_> {
         let (canonical, areas, normals) = surface_cells(&shape, rings, sectors);
         let rotation = self.rotation(x);
         let translation = DVec3::new(x[6], x[7], x[8]);
-        let to_world =
-            |p: &[DVec3]| -> Vec<DVec3> { p.iter().map(|p| rotation * *p + translation).collect() };
-        let cells = to_world(&canonical);
+        let cells: Vec<DVec3> = canonical
+            .iter()
+            .map(|p| rotation * *p + translation)
+            .collect();
         // seen from a viewpoint, a cell's share is its area times its view weight (the
         // visibility found once here, held for the differences below)
         let world_normals: Vec<DVec3> = match self.viewpoint {
