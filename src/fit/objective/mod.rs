@@ -428,8 +428,17 @@ impl<'a> Window<'a> {
             self.sweep_range(polar - half, polar + half)
         };
         // the radii of the window's sweep samples bound how near a node's sweep comes
-        let (r_lo, r_hi) = (0..span)
-            .map(|j| self.radius[(first + j) % count])
+        // (the window's sweep indices, wrapped at the seam: two plain runs, no division
+        // per step)
+        let window = [
+            first..count.min(first + span),
+            0..(first + span).saturating_sub(count),
+        ];
+        let (r_lo, r_hi) = window
+            .clone()
+            .into_iter()
+            .flatten()
+            .map(|m| self.radius[m])
             .fold((f64::INFINITY, 0.0f64), |(lo, hi), r| {
                 (lo.min(r), hi.max(r))
             });
@@ -447,66 +456,74 @@ impl<'a> Window<'a> {
             if gap * gap + dz * dz >= cut2 {
                 continue;
             }
-            for j in 0..span {
-                let m = (first + j) % count;
-                let [cx, cy] = self.sweep.point[m];
-                let (ex, ey) = (q.x - lambda * cx, q.y - lambda * cy);
-                let d2 = ex * ex + ey * ey + dz * dz;
-                if d2 >= cut2 {
-                    continue;
-                }
-                let [dx, dy] = self.sweep.tangent[m];
-                let cross = cx * dy - cy * dx;
-                // the surface element's weight: its area, or seen by the sensor its
-                // projected area lambda·(-n·v)/|v|, n = (a3 tw dy, -a3 tw dx, -tc cross)
-                // (the two halves of the section's step one by one: at a sharp corner
-                // one may face the sensor and the other not, and their areas add up where
-                // the step's own would cut the corner)
-                let weight = match sight {
-                    Some(v) => {
-                        if !self.normaliser.sees(self.rings[k], self.sectors[m]) {
-                            continue;
-                        }
-                        let facing = self.half_facing(k, dx, dy, cross, v);
-                        let projected = facing.iter().map(|f| (-f).max(0.0)).sum::<f64>();
-                        if projected <= 0.0 {
-                            continue;
-                        }
-                        lambda * projected / sight_length
+            for run in window.clone() {
+                for m in run {
+                    let [cx, cy] = self.sweep.point[m];
+                    let (ex, ey) = (q.x - lambda * cx, q.y - lambda * cy);
+                    let d2 = ex * ex + ey * ey + dz * dz;
+                    if d2 >= cut2 {
+                        continue;
                     }
-                    None => lambda * self.half_areas(k, dx, dy, cross).iter().sum::<f64>(),
-                };
-                let gauss = (-0.5 * d2 / self.var).exp();
-                let term = weight * (gauss - self.floor);
-                out.sum += term;
-                if !with_gradient {
-                    continue;
-                }
-                // d term = slope · d(-d²/2) + term · d ln weight
-                let slope = weight * gauss / self.var;
-                let e = DVec3::new(ex, ey, dz);
-                out.by_point -= slope * e;
-                let [dc, dw] = self.section.d_point[k];
-                let [dcx, dcy] = self.sweep.d_point[m];
-                let radial = ex * cx + ey * cy;
-                // through the surface position S = (lambda C, a3 w)
-                let mut by_shape = [
-                    ex * lambda * cx / a1,
-                    ey * lambda * cy / a2,
-                    dz * w,
-                    radial,
-                    radial * dc + dz * a3 * dw,
-                    lambda * (ex * dcx + ey * dcy),
-                ];
-                for v in &mut by_shape {
-                    *v *= slope;
-                }
-                out.ln_sigma += slope * d2;
-                // through the weight: ln lambda, then the area or the projected area
-                let mut log_weight = [0.0, 0.0, 0.0, 1.0 / lambda, dc / lambda, 0.0];
-                self.add_log_weight_partials(k, m, sight, term, &mut log_weight, &mut out.by_sight);
-                for p in 0..6 {
-                    out.shape[p] += by_shape[p] + term * log_weight[p];
+                    let [dx, dy] = self.sweep.tangent[m];
+                    let cross = cx * dy - cy * dx;
+                    // the surface element's weight: its area, or seen by the sensor its
+                    // projected area lambda·(-n·v)/|v|, n = (a3 tw dy, -a3 tw dx, -tc cross)
+                    // (the two halves of the section's step one by one: at a sharp corner
+                    // one may face the sensor and the other not, and their areas add up where
+                    // the step's own would cut the corner)
+                    let weight = match sight {
+                        Some(v) => {
+                            if !self.normaliser.sees(self.rings[k], self.sectors[m]) {
+                                continue;
+                            }
+                            let facing = self.half_facing(k, dx, dy, cross, v);
+                            let projected = facing.iter().map(|f| (-f).max(0.0)).sum::<f64>();
+                            if projected <= 0.0 {
+                                continue;
+                            }
+                            lambda * projected / sight_length
+                        }
+                        None => lambda * self.half_areas(k, dx, dy, cross).iter().sum::<f64>(),
+                    };
+                    let gauss = (-0.5 * d2 / self.var).exp();
+                    let term = weight * (gauss - self.floor);
+                    out.sum += term;
+                    if !with_gradient {
+                        continue;
+                    }
+                    // d term = slope · d(-d²/2) + term · d ln weight
+                    let slope = weight * gauss / self.var;
+                    let e = DVec3::new(ex, ey, dz);
+                    out.by_point -= slope * e;
+                    let [dc, dw] = self.section.d_point[k];
+                    let [dcx, dcy] = self.sweep.d_point[m];
+                    let radial = ex * cx + ey * cy;
+                    // through the surface position S = (lambda C, a3 w)
+                    let mut by_shape = [
+                        ex * lambda * cx / a1,
+                        ey * lambda * cy / a2,
+                        dz * w,
+                        radial,
+                        radial * dc + dz * a3 * dw,
+                        lambda * (ex * dcx + ey * dcy),
+                    ];
+                    for v in &mut by_shape {
+                        *v *= slope;
+                    }
+                    out.ln_sigma += slope * d2;
+                    // through the weight: ln lambda, then the area or the projected area
+                    let mut log_weight = [0.0, 0.0, 0.0, 1.0 / lambda, dc / lambda, 0.0];
+                    self.add_log_weight_partials(
+                        k,
+                        m,
+                        sight,
+                        term,
+                        &mut log_weight,
+                        &mut out.by_sight,
+                    );
+                    for p in 0..6 {
+                        out.shape[p] += by_shape[p] + term * log_weight[p];
+                    }
                 }
             }
         }
