@@ -505,10 +505,18 @@ impl Problem<'_> {
                 }
             }
         }
+        // (without a viewpoint every cell is kept: no copy)
+        let (cells, areas) = match view {
+            Some(_) => (
+                kept.iter().map(|&j| cells[j]).collect(),
+                kept.iter().map(|&j| areas[j]).collect(),
+            ),
+            None => (cells, areas),
+        };
         Surface {
             bounds,
-            cells: kept.iter().map(|&j| cells[j]).collect(),
-            areas: kept.iter().map(|&j| areas[j]).collect(),
+            cells,
+            areas,
             d_cells,
             d_log_areas,
             d_log_area,

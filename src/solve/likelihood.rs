@@ -113,6 +113,7 @@ pub fn minimise(
             None => damped_step(g, h, lambda, &free),
         }
     };
+    let trial_gradients = problem.trial_gradients();
     let (mut f, mut g, mut h) = problem.evaluate(&x, true);
     let mut lambda = 1e-3;
     let mut iterations = 0;
@@ -123,7 +124,7 @@ pub fn minimise(
             break;
         };
         let trial = problem.admit(x + step);
-        let evaluated = trial.map(|t| problem.evaluate(&t, problem.trial_gradients()));
+        let evaluated = trial.map(|t| problem.evaluate(&t, trial_gradients));
         match (trial, evaluated) {
             (Some(trial), Some(evaluated)) if evaluated.0 < f => {
                 let decrease = f - evaluated.0;
@@ -140,7 +141,7 @@ pub fn minimise(
                     || step.norm() < stopping.step
                     || iterations == stopping.max_iterations;
                 // (the value in the new reference; a step no one takes needs no gradient)
-                (f, g, h) = if stands && (last || problem.trial_gradients()) {
+                (f, g, h) = if stands && (last || trial_gradients) {
                     evaluated
                 } else {
                     problem.evaluate(&x, !last)

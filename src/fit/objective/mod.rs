@@ -427,9 +427,8 @@ impl<'a> Window<'a> {
             let polar = q.y.atan2(q.x).rem_euclid(TAU);
             self.sweep_range(polar - half, polar + half)
         };
-        // the radii of the window's sweep samples bound how near a node's sweep comes
-        // (the window's sweep indices, wrapped at the seam: two plain runs, no division
-        // per step)
+        // the window's sweep indices, wrapped at the seam (two plain runs, no division
+        // per step); their radii bound how near a node's sweep comes
         let window = [
             first..count.min(first + span),
             0..(first + span).saturating_sub(count),
