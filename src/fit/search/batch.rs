@@ -132,6 +132,11 @@ fn fit_batch_searched(
             resolved[i].0.viewpoint = Viewpoint::None;
             resolved[i].1 = resolved[i].1.dropped(&warning);
             results[i] = refit.map(|mut r| {
+                // (the fit with the viewpoint, and the wait for the others' refits)
+                let first = spent - r.timing_ms.total;
+                r.timing_ms
+                    .stages
+                    .insert(ablation::name(Stage::InconsistentViewpoint), first);
                 r.timing_ms.total = spent;
                 r.warnings.push(warning);
                 r
@@ -180,6 +185,8 @@ fn searched_once(
             .iter()
             .filter_map(|&(a, b)| Some((local(a)?, local(b)?)))
             .collect();
+        // (the preparation and the groups searched before count as stage 1)
+        let searched_at = start.elapsed().as_secs_f64() * 1e3;
         let found = search_group(evaluator, &group, &local_twins)?;
         for ((i, p), f) in group.iter().zip(found) {
             dropped[*i] = f.stopped_after;
@@ -199,11 +206,14 @@ fn searched_once(
                 p.scatter().map(|s| s * p.norm.scale)
             }));
             r.search = Some(f.tried);
+            // (and the reports' own checks as stage 2, so that the parts make the total)
+            let total = start.elapsed().as_secs_f64() * 1e3;
+            let stage1 = searched_at + f.round1_ms;
             r.timing_ms = Timing {
-                stage1: f.round1_ms,
-                stage2: f.round2_ms + f.finalists_ms,
+                stage1,
+                stage2: total - stage1,
                 noise_model: f.finalists_ms,
-                total: start.elapsed().as_secs_f64() * 1e3,
+                total,
                 ..Default::default()
             };
             results[*i] = Some(Ok(r));

@@ -272,7 +272,7 @@ pub(super) struct Found {
     pub best: Scored,
     pub stage1_iterations: usize,
     pub round1_ms: f64,
-    pub round2_ms: f64,
+    /// the noise model's time (round 2 and the twin cut before it are the rest of stage 2)
     pub finalists_ms: f64,
     /// its twin's reading was plainly more likely: the round it went no further than
     pub stopped_after: Option<&'static str>,
@@ -320,7 +320,6 @@ pub(super) fn search_group(
             best,
             stage1_iterations: first.stage1_iterations[cloud],
             round1_ms: ms(t1),
-            round2_ms: ms(t2 - t1),
             finalists_ms: ms(t3 - t2),
             stopped_after: if first.dropped[cloud] {
                 Some("round 1")
