@@ -35,6 +35,12 @@ pub trait LikelihoodProblem {
     fn trial_gradients(&self) -> bool {
         false
     }
+    /// Keeps the current reference (rotation, grid, held visibility) so that
+    /// [`LikelihoodProblem::restore`] can go back to it; nothing where accepting a point
+    /// never changes the function.
+    fn save(&mut self) {}
+    /// Goes back to the reference [`LikelihoodProblem::save`] kept.
+    fn restore(&mut self) {}
 }
 
 /// Folds the turn of `x` (parameters 9-11) into `rotation`, the reference it is applied
@@ -129,6 +135,8 @@ pub fn minimise(
             (Some(trial), Some(evaluated)) if evaluated.0 < f => {
                 let decrease = f - evaluated.0;
                 let step = trial - x;
+                let before = (x, f, g, h);
+                problem.save();
                 let stands;
                 (x, stands) = problem.accept(trial);
                 lambda = (lambda / 3.0).max(1e-9);
@@ -146,6 +154,18 @@ pub fn minimise(
                 } else {
                     problem.evaluate(&x, !last)
                 };
+                // (a step that went downhill only on the old reference's grid and view
+                // is no step: the function minimised is the one each point is
+                // evaluated on in its own reference)
+                if !stands && f > before.1 {
+                    problem.restore();
+                    (x, f, g, h) = before;
+                    lambda *= 4.0;
+                    if last || lambda > 1e6 {
+                        break;
+                    }
+                    continue;
+                }
                 if last {
                     break;
                 }
@@ -228,6 +248,58 @@ mod tests {
         fn trial_gradients(&self) -> bool {
             self.trials
         }
+    }
+
+    /// A bowl whose reference moves on every accepted step longer than half a unit (as
+    /// a quadrature regrids): its centre shifts by `drift`, so such a step lands worse
+    /// than it started once its new reference is evaluated.
+    struct DriftingBowl {
+        bowl: Bowl,
+        drift: Vector,
+        last: Vector,
+        saved: Option<(Vector, Vector)>,
+    }
+
+    impl LikelihoodProblem for DriftingBowl {
+        fn evaluate(&self, x: &Vector, with_gradient: bool) -> (f64, Vector, Matrix) {
+            self.bowl.evaluate(x, with_gradient)
+        }
+        fn admit(&self, x: Vector) -> Option<Vector> {
+            self.bowl.admit(x)
+        }
+        fn accept(&mut self, x: Vector) -> (Vector, bool) {
+            let moved = (x - self.last).norm() > 0.5;
+            if moved {
+                self.bowl.centre += self.drift;
+            }
+            self.last = x;
+            (x, !moved)
+        }
+        fn save(&mut self) {
+            self.saved = Some((self.bowl.centre, self.last));
+        }
+        fn restore(&mut self) {
+            (self.bowl.centre, self.last) = self.saved.take().unwrap();
+        }
+    }
+
+    #[test]
+    fn a_step_whose_new_reference_is_worse_is_not_taken() {
+        let start = Vector::from_element(1.0);
+        let mut drifting = DriftingBowl {
+            bowl: Bowl::new(Vector::zeros(), -10.0),
+            drift: Vector::from_element(3.0),
+            last: start,
+            saved: None,
+        };
+        let held = Held {
+            parameters: [false; PARAMETERS],
+            axis: None,
+        };
+        let minimum = minimise(&mut drifting, start, &held, &stopping());
+        // only steps short enough to keep the reference were taken: the centre never moved
+        assert_eq!(drifting.bowl.centre, Vector::zeros());
+        assert!(minimum.x.norm() < 1e-6, "{minimum:?}");
     }
 
     fn stopping() -> Stopping {

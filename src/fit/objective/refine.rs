@@ -86,6 +86,7 @@ pub fn refine_on(
         bounds: limits.bounds,
         sigma,
         holed: start.shape.a4 > 1.0,
+        saved: None,
     };
     let stopping = Stopping {
         max_iterations,
@@ -109,6 +110,8 @@ struct Boxed<'a> {
     bounds: Bounds,
     sigma: f64,
     holed: bool,
+    /// the reference [`LikelihoodProblem::save`] kept: rotation, grid, held visibility
+    saved: Option<(glam::DQuat, Grid, Option<Vec<bool>>)>,
 }
 
 impl LikelihoodProblem for Boxed<'_> {
@@ -140,6 +143,18 @@ impl LikelihoodProblem for Boxed<'_> {
         objective.grid = Grid::for_shape(&Objective::shape(&x), x[12].exp());
         objective.hold(&x);
         (x, false)
+    }
+
+    fn save(&mut self) {
+        let o = &self.objective;
+        self.saved = Some((o.rotation0, o.grid.clone(), o.visible.clone()));
+    }
+
+    fn restore(&mut self) {
+        if let Some((rotation0, grid, visible)) = self.saved.take() {
+            let o = &mut self.objective;
+            (o.rotation0, o.grid, o.visible) = (rotation0, grid, visible);
+        }
     }
 }
 
