@@ -724,6 +724,7 @@ fn refine_problem(
         problem,
         bounds: limits.bounds,
         sigma,
+        saved: None,
     };
     let stopping = Stopping {
         max_iterations,
@@ -751,6 +752,8 @@ struct Bounded<'a> {
     problem: Problem<'a>,
     bounds: Bounds,
     sigma: f64,
+    /// the reference [`LikelihoodProblem::save`] kept: rotation and grid
+    saved: Option<(DQuat, (usize, usize))>,
 }
 
 impl LikelihoodProblem for Bounded<'_> {
@@ -788,6 +791,16 @@ impl LikelihoodProblem for Bounded<'_> {
     /// left perturbation's, as the folded reference's is)
     fn trial_gradients(&self) -> bool {
         true
+    }
+
+    fn save(&mut self) {
+        self.saved = Some((self.problem.rotation0, self.problem.grid));
+    }
+
+    fn restore(&mut self) {
+        if let Some((rotation0, grid)) = self.saved.take() {
+            (self.problem.rotation0, self.problem.grid) = (rotation0, grid);
+        }
     }
 }
 

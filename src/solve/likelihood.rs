@@ -36,11 +36,10 @@ pub trait LikelihoodProblem {
         false
     }
     /// Keeps the current reference (rotation, grid, held visibility) so that
-    /// [`LikelihoodProblem::restore`] can go back to it; nothing where accepting a point
-    /// never changes the function.
-    fn save(&mut self) {}
+    /// [`LikelihoodProblem::restore`] can go back to it.
+    fn save(&mut self);
     /// Goes back to the reference [`LikelihoodProblem::save`] kept.
-    fn restore(&mut self) {}
+    fn restore(&mut self);
 }
 
 /// Folds the turn of `x` (parameters 9-11) into `rotation`, the reference it is applied
@@ -248,6 +247,9 @@ mod tests {
         fn trial_gradients(&self) -> bool {
             self.trials
         }
+        // (accepting a point never changes the bowl)
+        fn save(&mut self) {}
+        fn restore(&mut self) {}
     }
 
     /// A bowl whose reference moves on every accepted step longer than half a unit (as
