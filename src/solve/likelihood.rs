@@ -2,7 +2,7 @@
 //! quadrature and the polish's surface grid) maximise theirs with this one loop. The
 //! Hessian is the BHHH outer product of the points' scores (the Fisher information near
 //! the optimum), so a problem gives its value, gradient and that product; the loop damps,
-//! projects, accepts and stops.
+//! projects, accepts (or takes a step back) and stops.
 //!
 //! Parameters (13): shape a1 a2 a3 a4 eps1 eps2, translation, a turn (rotation vector on
 //! the left of the problem's reference rotation, world frame), ln sigma. After each
@@ -82,7 +82,9 @@ pub struct Minimum {
 }
 
 /// Minimises `problem` from `x` by Levenberg-Marquardt (damping 1e-3 at the start, /3
-/// after an accepted step, x4 after a rejected one, stopping above 1e6).
+/// after an accepted step, x4 after a rejected one, stopping above 1e6). A step whose
+/// value in its own new reference is above the last accepted value counts as rejected,
+/// and the problem goes back to its saved reference.
 pub fn minimise(
     problem: &mut impl LikelihoodProblem,
     mut x: Vector,
