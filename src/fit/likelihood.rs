@@ -724,7 +724,7 @@ fn refine_problem(
         problem,
         bounds: limits.bounds,
         sigma,
-        saved: None,
+        previous: None,
     };
     let stopping = Stopping {
         max_iterations,
@@ -752,8 +752,8 @@ struct Bounded<'a> {
     problem: Problem<'a>,
     bounds: Bounds,
     sigma: f64,
-    /// the reference [`LikelihoodProblem::save`] kept: rotation and grid
-    saved: Option<(DQuat, (usize, usize))>,
+    /// the reference before the last accepted step: rotation and grid
+    previous: Option<(DQuat, (usize, usize))>,
 }
 
 impl LikelihoodProblem for Bounded<'_> {
@@ -774,6 +774,7 @@ impl LikelihoodProblem for Bounded<'_> {
         // the turn folds into the starting rotation (the gradient is the left
         // perturbation's at zero)
         let problem = &mut self.problem;
+        self.previous = Some((problem.rotation0, problem.grid));
         problem.rotation0 = fold_turn(&mut x, problem.rotation0);
         let grid = problem.grid;
         problem.grid = regrid(
@@ -793,12 +794,8 @@ impl LikelihoodProblem for Bounded<'_> {
         true
     }
 
-    fn save(&mut self) {
-        self.saved = Some((self.problem.rotation0, self.problem.grid));
-    }
-
     fn restore(&mut self) {
-        if let Some((rotation0, grid)) = self.saved.take() {
+        if let Some((rotation0, grid)) = self.previous.take() {
             (self.problem.rotation0, self.problem.grid) = (rotation0, grid);
         }
     }

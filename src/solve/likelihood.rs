@@ -35,10 +35,8 @@ pub trait LikelihoodProblem {
     fn trial_gradients(&self) -> bool {
         false
     }
-    /// Keeps the current reference (rotation, grid, held visibility) so that
-    /// [`LikelihoodProblem::restore`] can go back to it.
-    fn save(&mut self);
-    /// Goes back to the reference [`LikelihoodProblem::save`] kept.
+    /// Goes back to the reference (rotation, grid, held visibility) the last
+    /// [`LikelihoodProblem::accept`] left.
     fn restore(&mut self);
 }
 
@@ -84,7 +82,7 @@ pub struct Minimum {
 /// Minimises `problem` from `x` by Levenberg-Marquardt (damping 1e-3 at the start, /3
 /// after an accepted step, x4 after a rejected one, stopping above 1e6). A step whose
 /// value in its own new reference is above the last accepted value counts as rejected,
-/// and the problem goes back to its saved reference.
+/// and the problem goes back to the reference it had before ([`LikelihoodProblem::restore`]).
 pub fn minimise(
     problem: &mut impl LikelihoodProblem,
     mut x: Vector,
@@ -137,7 +135,6 @@ pub fn minimise(
                 let decrease = f - evaluated.0;
                 let step = trial - x;
                 let before = (x, f, g, h);
-                problem.save();
                 let stands;
                 (x, stands) = problem.accept(trial);
                 lambda = (lambda / 3.0).max(1e-9);
@@ -250,7 +247,6 @@ mod tests {
             self.trials
         }
         // (accepting a point never changes the bowl)
-        fn save(&mut self) {}
         fn restore(&mut self) {}
     }
 
@@ -261,7 +257,7 @@ mod tests {
         bowl: Bowl,
         drift: Vector,
         last: Vector,
-        saved: Option<(Vector, Vector)>,
+        previous: Option<(Vector, Vector)>,
     }
 
     impl LikelihoodProblem for DriftingBowl {
@@ -272,6 +268,7 @@ mod tests {
             self.bowl.admit(x)
         }
         fn accept(&mut self, x: Vector) -> (Vector, bool) {
+            self.previous = Some((self.bowl.centre, self.last));
             let moved = (x - self.last).norm() > 0.5;
             if moved {
                 self.bowl.centre += self.drift;
@@ -279,11 +276,8 @@ mod tests {
             self.last = x;
             (x, !moved)
         }
-        fn save(&mut self) {
-            self.saved = Some((self.bowl.centre, self.last));
-        }
         fn restore(&mut self) {
-            (self.bowl.centre, self.last) = self.saved.take().unwrap();
+            (self.bowl.centre, self.last) = self.previous.take().unwrap();
         }
     }
 
@@ -294,7 +288,7 @@ mod tests {
             bowl: Bowl::new(Vector::zeros(), -10.0),
             drift: Vector::from_element(3.0),
             last: start,
-            saved: None,
+            previous: None,
         };
         let held = Held {
             parameters: [false; PARAMETERS],

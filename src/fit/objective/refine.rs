@@ -86,7 +86,7 @@ pub fn refine_on(
         bounds: limits.bounds,
         sigma,
         holed: start.shape.a4 > 1.0,
-        saved: None,
+        previous: None,
     };
     let stopping = Stopping {
         max_iterations,
@@ -110,8 +110,8 @@ struct Boxed<'a> {
     bounds: Bounds,
     sigma: f64,
     holed: bool,
-    /// the reference [`LikelihoodProblem::save`] kept: rotation, grid, held visibility
-    saved: Option<(glam::DQuat, Grid, Option<Vec<bool>>)>,
+    /// the reference before the last accepted step: rotation, grid, held visibility
+    previous: Option<(glam::DQuat, Grid, Option<Vec<bool>>)>,
 }
 
 impl LikelihoodProblem for Boxed<'_> {
@@ -139,19 +139,20 @@ impl LikelihoodProblem for Boxed<'_> {
 
     fn accept(&mut self, mut x: Vector) -> (Vector, bool) {
         let objective = &mut self.objective;
-        objective.rotation0 = fold_turn(&mut x, objective.rotation0);
-        objective.grid = Grid::for_shape(&Objective::shape(&x), x[12].exp());
+        let rotation0 = objective.rotation0;
+        objective.rotation0 = fold_turn(&mut x, rotation0);
+        let grid = std::mem::replace(
+            &mut objective.grid,
+            Grid::for_shape(&Objective::shape(&x), x[12].exp()),
+        );
+        let visible = objective.visible.take();
         objective.hold(&x);
+        self.previous = Some((rotation0, grid, visible));
         (x, false)
     }
 
-    fn save(&mut self) {
-        let o = &self.objective;
-        self.saved = Some((o.rotation0, o.grid.clone(), o.visible.clone()));
-    }
-
     fn restore(&mut self) {
-        if let Some((rotation0, grid, visible)) = self.saved.take() {
+        if let Some((rotation0, grid, visible)) = self.previous.take() {
             let o = &mut self.objective;
             (o.rotation0, o.grid, o.visible) = (rotation0, grid, visible);
         }
