@@ -38,7 +38,11 @@
 //! moving the view weights in the gradient) and the kernel cut at 4 sigmas instead of
 //! 3.5 ([`CUTOFF`]), 268 and 238. The search polishes with it ([`super::search::polish`]).
 
+mod derivatives;
 pub(crate) mod visibility;
+
+pub(crate) use derivatives::size_derivatives;
+use derivatives::{Curves, d_log_view_weight};
 
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};
@@ -123,17 +127,6 @@ fn surface_cells(
     rings: usize,
     sectors: usize,
 ) -> (Vec<DVec3>, Vec<f64>, Vec<DVec3>) {
-    surface_cells_of(shape, rings, sectors, None)
-}
-
-/// [`surface_cells`] of the cells `of` alone (indices `ring * sectors + sector`), or of
-/// all.
-fn surface_cells_of(
-    shape: &[f64; 6],
-    rings: usize,
-    sectors: usize,
-    of: Option<&[usize]>,
-) -> (Vec<DVec3>, Vec<f64>, Vec<DVec3>) {
     use std::f64::consts::TAU;
     let [a1, a2, a3, a4, eps1, eps2] = *shape;
     let section: Vec<(f64, f64)> = (0..=rings)
@@ -161,7 +154,7 @@ fn surface_cells_of(
     // whose outward direction is away from its section's centre on the x axis)
     let (c, _, n) = cell(0, 0);
     let inward = n.dot(c - DVec3::new(a1 * a4, 0.0, 0.0)) < 0.0;
-    let count = of.map_or(rings * sectors, <[usize]>::len);
+    let count = rings * sectors;
     let mut centres = Vec::with_capacity(count);
     let mut areas = Vec::with_capacity(count);
     let mut normals = Vec::with_capacity(count);
@@ -170,12 +163,7 @@ fn surface_cells_of(
         areas.push(area);
         normals.push(if inward { -normal } else { normal });
     };
-    match of {
-        Some(of) => of
-            .iter()
-            .for_each(|&k| push(cell(k / sectors, k % sectors))),
-        None => (0..rings).for_each(|i| (0..sectors).for_each(|j| push(cell(i, j)))),
-    }
+    (0..rings).for_each(|i| (0..sectors).for_each(|j| push(cell(i, j))));
     (centres, areas, normals)
 }
 
@@ -437,46 +425,38 @@ impl Problem<'_> {
             Some(_) => (0..cells.len()).filter(|&j| areas[j] > 0.0).collect(),
             None => (0..cells.len()).collect(),
         };
-        let m = kept.len();
-        let mut d_cells = Vec::new();
-        let mut d_log_areas = Vec::new();
+        let mut d_cells = Vec::with_capacity(kept.len());
+        let mut d_log_areas = Vec::with_capacity(kept.len());
         let mut d_log_area = [0.0; 6];
         if with_derivatives {
-            d_cells = vec![[DVec3::ZERO; 6]; m];
-            d_log_areas = vec![[0.0; 6]; m];
-            // (the six moved surfaces are most of an evaluation's work: built in parallel,
-            // the kept cells' centres and weights alone)
-            let moved: Vec<(f64, Vec<DVec3>, Vec<f64>)> = (0..6)
-                .into_par_iter()
-                .map(|k| {
-                    let mut moved = shape;
-                    let step = 1e-6 * shape[k].abs().max(1e-2);
-                    moved[k] += step;
-                    let (canonical2, areas2, normals2) = surface_cells_of(
-                        &moved,
-                        rings,
-                        sectors,
-                        view.as_ref().map(|_| kept.as_slice()),
-                    );
-                    let areas2 = match &view {
-                        Some(view) => (0..kept.len())
-                            .map(|i| {
-                                let cell = rotation * canonical2[i] + translation;
-                                view.weight(kept[i], areas2[i], cell, normals2[i], rotation)
-                            })
-                            .collect(),
-                        None => areas2,
-                    };
-                    (step, canonical2, areas2)
+            // (each kept cell's six derivatives in closed form, `derivatives`)
+            let curves = Curves::new(&shape, rings, sectors);
+            let per_cell: Vec<([DVec3; 6], [f64; 6])> = kept
+                .par_iter()
+                .map(|&j| {
+                    let d = curves.cell(&shape, j / sectors, j % sectors, normals[j]);
+                    let d_world = d.centre.map(|c| rotation * c);
+                    let mut d_log = d.log_area;
+                    if let Some(view) = &view {
+                        for k in 0..6 {
+                            d_log[k] = d_log_view_weight(
+                                d.log_area[k],
+                                d_world[k],
+                                rotation * d.normal[k],
+                                world_normals[j],
+                                cells[j] - view.viewpoint,
+                            );
+                        }
+                    }
+                    (d_world, d_log)
                 })
                 .collect();
-            for (k, (step, canonical2, areas2)) in moved.into_iter().enumerate() {
-                d_log_area[k] = (areas2.iter().sum::<f64>() / area - 1.0) / step;
-                for (i, &j) in kept.iter().enumerate() {
-                    d_cells[i][k] = rotation * ((canonical2[i] - canonical[j]) / step);
-                    d_log_areas[i][k] =
-                        (areas2[i] - areas[j]) / (step * areas[j].max(f64::MIN_POSITIVE));
+            for (&j, (d_world, d_log)) in kept.iter().zip(&per_cell) {
+                for k in 0..6 {
+                    d_log_area[k] += areas[j] * d_log[k] / area;
                 }
+                d_cells.push(*d_world);
+                d_log_areas.push(*d_log);
             }
         }
         let mut d_log_weights_pose = Vec::new();

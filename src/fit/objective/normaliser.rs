@@ -8,7 +8,7 @@
 //! so the density they integrate is the one A normalises.
 
 use super::tables::{section_range, unit_superellipse};
-use crate::fit::likelihood::visibility::View;
+use crate::fit::likelihood::{size_derivatives, visibility::View};
 use crate::model::Shape;
 use glam::{DQuat, DVec3};
 use std::f64::consts::TAU;
@@ -133,26 +133,35 @@ pub fn normaliser(
     let (lo, hi, _) = section_range(shape);
     let unit = UnitCurves::new(shape, grid);
     let cells = Cells::new(shape, &unit);
-    // the cells with shape parameter k moved by a small step (the unit curves kept for
-    // the sizes, made again for the exponents and for a4, which moves the end of an open
-    // section)
+    // the cells with shape parameter k (a4 or an exponent) moved by a small step (a4
+    // moves the end of an open section, so the unit curves are made again)
+    let shape_array = shape.to_array();
     let moved = |k: usize| {
-        let mut v = shape.to_array();
+        let mut v = shape_array;
         let step = 1e-6 * v[k].abs().max(1e-2);
         v[k] += step;
         let moved = Shape::from_array(v);
-        let cells = if k < 3 {
-            Cells::new(&moved, &unit)
-        } else {
-            Cells::new(&moved, &UnitCurves::new(&moved, grid))
-        };
+        let cells = Cells::new(&moved, &UnitCurves::new(&moved, grid));
         (cells, step)
     };
     let Some((viewpoint, reference)) = sensor else {
         let area: f64 = cells.areas.iter().sum();
         let mut d_log_area = [0.0; 12];
         if with_gradient {
-            for (k, d) in d_log_area.iter_mut().enumerate().take(6) {
+            for j in 0..cells.areas.len() {
+                for (k, d) in d_log_area.iter_mut().enumerate().take(3) {
+                    let (_, d_log) = size_derivatives(
+                        &shape_array,
+                        k,
+                        cells.centres[j],
+                        cells.normals[j],
+                        rotation,
+                        None,
+                    );
+                    *d += cells.areas[j] * d_log / area;
+                }
+            }
+            for (k, d) in d_log_area.iter_mut().enumerate().take(6).skip(3) {
                 let (moved, step) = moved(k);
                 *d = (moved.areas.iter().sum::<f64>() / area - 1.0) / step;
             }
@@ -180,36 +189,55 @@ pub fn normaliser(
         Some(held) if held.len() == cells.areas.len() => held.to_vec(),
         _ => View::unoccluded(&world_cells, &cells.areas, &world_normals, grid, viewpoint),
     };
+    // a cell's density: its area times cos(incidence) / range², relative to the reference
+    let density_of = |area: f64, cell: DVec3, normal: DVec3| -> f64 {
+        let q = cell - viewpoint;
+        let range2 = q.length_squared();
+        let cos = (-normal.dot(q)).max(0.0) / range2.sqrt();
+        area * cos * reference / range2
+    };
     let density = |areas: &[f64], cells: &[DVec3], normals: &[DVec3]| -> f64 {
         (0..cells.len())
             .filter(|&j| visible[j])
-            .map(|j| {
-                let q = cells[j] - viewpoint;
-                let range2 = q.length_squared();
-                let cos = (-normals[j].dot(q)).max(0.0) / range2.sqrt();
-                areas[j] * cos * reference / range2
-            })
+            .map(|j| density_of(areas[j], cells[j], normals[j]))
             .sum()
     };
     let area = density(&cells.areas, &world_cells, &world_normals).max(1e-300);
     let mut d_log_area = [0.0; 12];
     if with_gradient {
-        for (k, d) in d_log_area.iter_mut().enumerate().take(6) {
+        // the sizes and the pose in closed form (ln density = ln area + ln(-n·q) - 3 ln|q|,
+        // q = centre - viewpoint: as the grid model's view weight, `size_derivatives`)
+        for j in (0..world_cells.len()).filter(|&j| visible[j]) {
+            let share = density_of(cells.areas[j], world_cells[j], world_normals[j]) / area;
+            if share <= 0.0 {
+                continue;
+            }
+            let q = world_cells[j] - viewpoint;
+            for (k, d) in d_log_area.iter_mut().enumerate().take(3) {
+                let (_, d_log) = size_derivatives(
+                    &shape_array,
+                    k,
+                    cells.centres[j],
+                    cells.normals[j],
+                    rotation,
+                    Some(q),
+                );
+                *d += share * d_log;
+            }
+            let n = world_normals[j];
+            let (nq, q2) = (n.dot(q), q.length_squared());
+            let by_shift = n / nq - 3.0 * q / q2;
+            let by_turn = n.cross(translation - viewpoint) / nq
+                - 3.0 * (world_cells[j] - translation).cross(q) / q2;
+            for k in 0..3 {
+                d_log_area[6 + k] += share * by_shift[k];
+                d_log_area[9 + k] += share * by_turn[k];
+            }
+        }
+        for (k, d) in d_log_area.iter_mut().enumerate().take(6).skip(3) {
             let (moved, step) = moved(k);
             let (c2, n2) = world(&moved, rotation, translation);
             *d = (density(&moved.areas, &c2, &n2) / area - 1.0) / step;
-        }
-        let step = 1e-6;
-        for k in 0..3 {
-            let mut shift = DVec3::ZERO;
-            shift[k] = step;
-            let shifted: Vec<DVec3> = world_cells.iter().map(|c| *c + shift).collect();
-            d_log_area[6 + k] =
-                (density(&cells.areas, &shifted, &world_normals) / area - 1.0) / step;
-            // a turn on the left about world axis k (the turn parameters' convention)
-            let turned = DQuat::from_scaled_axis(shift) * rotation;
-            let (c2, n2) = world(&cells, turned, translation);
-            d_log_area[9 + k] = (density(&cells.areas, &c2, &n2) / area - 1.0) / step;
         }
     }
     Normaliser {

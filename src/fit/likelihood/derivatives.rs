@@ -1,0 +1,152 @@
+//! The surface grid's cells differentiated in the shape in closed form: each corner of
+//! the grid is r_t of eq. (2) at polar angles (`superellipse_polar`), so its derivative
+//! in a size, in a4 or in an exponent is a product of the two curves' points and their
+//! derivatives; a cell's centre is the mean of its corners, its area and normal come
+//! from the cross product of its diagonals.
+
+use crate::fit::objective::tables::unit_superellipse;
+use glam::{DQuat, DVec3};
+
+/// The superellipse point of [`super::superellipse_polar`] at polar angle `phi` and its
+/// derivative in the exponent.
+fn superellipse_polar_with_derivative(phi: f64, eps: f64) -> [(f64, f64); 2] {
+    let (x, y, dx, dy) = unit_superellipse(phi, eps);
+    [(x, y), (dx, dy)]
+}
+
+/// The grid's two curves at a shape, with their derivatives in the exponents.
+pub(super) struct Curves {
+    /// section (c, z) per ring boundary, and d/d eps1
+    pub section: Vec<[(f64, f64); 2]>,
+    /// top view (x, y) per sector boundary, and d/d eps2
+    pub top: Vec<[(f64, f64); 2]>,
+}
+
+impl Curves {
+    pub fn new(shape: &[f64; 6], rings: usize, sectors: usize) -> Self {
+        use std::f64::consts::TAU;
+        Self {
+            section: (0..=rings)
+                .map(|i| {
+                    superellipse_polar_with_derivative(TAU * i as f64 / rings as f64, shape[4])
+                })
+                .collect(),
+            top: (0..=sectors)
+                .map(|j| {
+                    superellipse_polar_with_derivative(TAU * j as f64 / sectors as f64, shape[5])
+                })
+                .collect(),
+        }
+    }
+
+    /// Corner (i, j) of the grid (canonical) and its derivatives in the six shape
+    /// parameters a1 a2 a3 a4 eps1 eps2.
+    fn corner(&self, shape: &[f64; 6], i: usize, j: usize) -> (DVec3, [DVec3; 6]) {
+        let [a1, a2, a3, a4, _, _] = *shape;
+        let [(c, z), (dc, dz)] = self.section[i];
+        let [(x, y), (dx, dy)] = self.top[j];
+        let r = a4 + c;
+        (
+            DVec3::new(a1 * r * x, a2 * r * y, a3 * z),
+            [
+                DVec3::new(r * x, 0.0, 0.0),
+                DVec3::new(0.0, r * y, 0.0),
+                DVec3::new(0.0, 0.0, z),
+                DVec3::new(a1 * x, a2 * y, 0.0),
+                DVec3::new(a1 * dc * x, a2 * dc * y, a3 * dz),
+                DVec3::new(a1 * r * dx, a2 * r * dy, 0.0),
+            ],
+        )
+    }
+
+    /// Cell (i, j)'s derivatives in the six shape parameters: d centre (canonical), and
+    /// d ln area and d normal (unit, canonical) per parameter; `normal` is the cell's
+    /// outward unit normal, which orients the diagonals' cross product.
+    pub fn cell(&self, shape: &[f64; 6], i: usize, j: usize, normal: DVec3) -> CellDerivatives {
+        let (c00, d00) = self.corner(shape, i, j);
+        let (c10, d10) = self.corner(shape, i + 1, j);
+        let (c01, d01) = self.corner(shape, i, j + 1);
+        let (c11, d11) = self.corner(shape, i + 1, j + 1);
+        let (u, v) = (c11 - c00, c10 - c01);
+        let outward = if u.cross(v).dot(normal) < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let normal = outward * u.cross(v);
+        let length = normal.length();
+        let unit = if length > 0.0 {
+            normal / length
+        } else {
+            DVec3::ZERO
+        };
+        let mut out = CellDerivatives {
+            centre: [DVec3::ZERO; 6],
+            log_area: [0.0; 6],
+            normal: [DVec3::ZERO; 6],
+        };
+        for k in 0..6 {
+            out.centre[k] = (d00[k] + d10[k] + d01[k] + d11[k]) * 0.25;
+            if length > 0.0 {
+                let d_normal =
+                    outward * ((d11[k] - d00[k]).cross(v) + u.cross(d10[k] - d01[k])) / length;
+                out.log_area[k] = unit.dot(d_normal);
+                out.normal[k] = d_normal - unit * out.log_area[k];
+            }
+        }
+        out
+    }
+}
+
+/// What [`Curves::cell`] gives.
+pub(super) struct CellDerivatives {
+    pub centre: [DVec3; 6],
+    pub log_area: [f64; 6],
+    pub normal: [DVec3; 6],
+}
+
+/// d ln of a cell's view weight, area · |n·q| / |q|³ ([`super::View::weight`]), from d ln
+/// area, the world derivatives of its centre and unit normal, its world unit normal and
+/// q = centre - viewpoint.
+pub(crate) fn d_log_view_weight(
+    d_log_area: f64,
+    d_centre: DVec3,
+    d_normal: DVec3,
+    normal: DVec3,
+    q: DVec3,
+) -> f64 {
+    d_log_area + (d_normal.dot(q) + normal.dot(d_centre)) / normal.dot(q)
+        - 3.0 * q.dot(d_centre) / q.length_squared()
+}
+
+/// A cell's derivatives in size `k` (a1, a2 or a3) alone, from its canonical centre and
+/// unit normal: d centre (world frame) and d ln of its weight, its area or seen from a
+/// sensor (`sight`: centre - viewpoint, world) its view weight. Scaling size k by s
+/// scales coordinate k of every corner by s, so the centre's, and the cross product of
+/// the diagonals by s in its two other components.
+pub(crate) fn size_derivatives(
+    shape: &[f64; 6],
+    k: usize,
+    centre: DVec3,
+    normal: DVec3,
+    rotation: DQuat,
+    sight: Option<DVec3>,
+) -> (DVec3, f64) {
+    let size = shape[k];
+    let mut d_centre = DVec3::ZERO;
+    d_centre[k] = centre[k] / size;
+    // d N over N's length: the normal with its own component left out, over the size
+    let mut others = normal;
+    others[k] = 0.0;
+    let others = others / size;
+    let d_log_area = normal.dot(others);
+    let d_world = rotation * d_centre;
+    let Some(q) = sight else {
+        return (d_world, d_log_area);
+    };
+    let d_normal = rotation * (others - normal * d_log_area);
+    (
+        d_world,
+        d_log_view_weight(d_log_area, d_world, d_normal, rotation * normal, q),
+    )
+}
