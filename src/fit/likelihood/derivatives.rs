@@ -7,19 +7,12 @@
 use crate::fit::objective::tables::unit_superellipse;
 use glam::{DQuat, DVec3};
 
-/// The superellipse point of [`super::superellipse_polar`] at polar angle `phi` and its
-/// derivative in the exponent.
-fn superellipse_polar_with_derivative(phi: f64, eps: f64) -> [(f64, f64); 2] {
-    let (x, y, dx, dy) = unit_superellipse(phi, eps);
-    [(x, y), (dx, dy)]
-}
-
-/// The grid's two curves at a shape, with their derivatives in the exponents.
+/// The grid's two curves at a shape, with their derivatives in the exponents: the
+/// section (c, z, dc, dz) per ring boundary (d/d eps1), the top view (x, y, dx, dy) per
+/// sector boundary (d/d eps2), both at the polar angles of [`super::superellipse_polar`].
 pub(super) struct Curves {
-    /// section (c, z) per ring boundary, and d/d eps1
-    pub section: Vec<[(f64, f64); 2]>,
-    /// top view (x, y) per sector boundary, and d/d eps2
-    pub top: Vec<[(f64, f64); 2]>,
+    section: Vec<(f64, f64, f64, f64)>,
+    top: Vec<(f64, f64, f64, f64)>,
 }
 
 impl Curves {
@@ -27,14 +20,10 @@ impl Curves {
         use std::f64::consts::TAU;
         Self {
             section: (0..=rings)
-                .map(|i| {
-                    superellipse_polar_with_derivative(TAU * i as f64 / rings as f64, shape[4])
-                })
+                .map(|i| unit_superellipse(TAU * i as f64 / rings as f64, shape[4]))
                 .collect(),
             top: (0..=sectors)
-                .map(|j| {
-                    superellipse_polar_with_derivative(TAU * j as f64 / sectors as f64, shape[5])
-                })
+                .map(|j| unit_superellipse(TAU * j as f64 / sectors as f64, shape[5]))
                 .collect(),
         }
     }
@@ -43,8 +32,8 @@ impl Curves {
     /// parameters a1 a2 a3 a4 eps1 eps2.
     fn corner(&self, shape: &[f64; 6], i: usize, j: usize) -> (DVec3, [DVec3; 6]) {
         let [a1, a2, a3, a4, _, _] = *shape;
-        let [(c, z), (dc, dz)] = self.section[i];
-        let [(x, y), (dx, dy)] = self.top[j];
+        let (c, z, dc, dz) = self.section[i];
+        let (x, y, dx, dy) = self.top[j];
         let r = a4 + c;
         (
             DVec3::new(a1 * r * x, a2 * r * y, a3 * z),
