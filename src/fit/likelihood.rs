@@ -26,7 +26,7 @@
 //! curvature the coarser rings bend the optimum with), each data point meeting only the cells within [`CUTOFF`] sigmas
 //! of it (a uniform bucket grid). The parameters, sigma with them, are found by
 //! Levenberg-Marquardt on the negative mean log-likelihood, the gradient in closed form
-//! for the pose and sigma and by differences of the (cheap, separable) grid for the shape.
+//! (for the shape through each grid corner's derivatives, `derivatives`).
 //!
 //! It runs on shapes with a hole (a4 > 1, where the grid covers the surface once), and
 //! only when the noise is large enough to bias least squares
@@ -318,7 +318,7 @@ impl Buckets {
 
 /// The surface grid at one parameter vector, in the normalised frame, with what the
 /// gradient needs: each cell's centre and area, and their derivatives in the six shape
-/// parameters (differences of the separable grid). Only the cells of positive weight are
+/// parameters (closed form, `derivatives`). Only the cells of positive weight are
 /// kept (seen from a viewpoint, about half of them are hidden or face away, and add
 /// nothing to a point's density or its gradient); `bounds` is the box of all of them.
 struct Surface {
@@ -407,7 +407,7 @@ impl Problem<'_> {
             .map(|p| rotation * *p + translation)
             .collect();
         // seen from a viewpoint, a cell's share is its area times its view weight (the
-        // visibility found once here, held for the differences below)
+        // visibility found once here)
         let world_normals: Vec<DVec3> = match self.viewpoint {
             Some(_) => normals.iter().map(|n| rotation * *n).collect(),
             None => Vec::new(),
