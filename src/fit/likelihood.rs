@@ -41,8 +41,7 @@
 mod derivatives;
 pub(crate) mod visibility;
 
-pub(crate) use derivatives::size_derivatives;
-use derivatives::{Curves, d_log_view_weight};
+pub(crate) use derivatives::{Curves, d_log_view_weight, size_derivatives};
 
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};

@@ -10,7 +10,7 @@ use glam::{DQuat, DVec3};
 /// The grid's two curves at a shape, with their derivatives in the exponents: the
 /// section (c, z, dc, dz) per ring boundary (d/d eps1), the top view (x, y, dx, dy) per
 /// sector boundary (d/d eps2), both at the polar angles of [`super::superellipse_polar`].
-pub(super) struct Curves {
+pub(crate) struct Curves {
     section: Vec<(f64, f64, f64, f64)>,
     top: Vec<(f64, f64, f64, f64)>,
 }
@@ -88,7 +88,7 @@ impl Curves {
 }
 
 /// What [`Curves::cell`] gives.
-pub(super) struct CellDerivatives {
+pub(crate) struct CellDerivatives {
     pub centre: [DVec3; 6],
     pub log_area: [f64; 6],
     pub normal: [DVec3; 6],

@@ -9,7 +9,7 @@
 //! so the density they integrate is the one A normalises.
 
 use super::tables::{section_range, unit_superellipse};
-use crate::fit::likelihood::{size_derivatives, visibility::View};
+use crate::fit::likelihood::{Curves, d_log_view_weight, size_derivatives, visibility::View};
 use crate::model::Shape;
 use glam::{DQuat, DVec3};
 use std::f64::consts::TAU;
@@ -145,24 +145,55 @@ pub fn normaliser(
         let cells = Cells::new(&moved, &UnitCurves::new(&moved, grid));
         (cells, step)
     };
+    // d ln of cell j's weight (its area, or seen along q = centre - viewpoint its
+    // density) in the shape parameters known in closed form: all six on a closed section
+    // (a4 >= 1: the grid's corners are the grid model's, `likelihood::derivatives`), the
+    // sizes alone on an open one, whose ends move with a4 and eps1 (those by differences)
+    let curves =
+        (with_gradient && shape.a4 >= 1.0).then(|| Curves::new(&shape_array, grid.0, grid.1));
+    let analytic = if curves.is_some() { 6 } else { 3 };
+    let d_log_weight = |j: usize, q: Option<DVec3>| -> [f64; 6] {
+        let mut d = [0.0; 6];
+        let Some(curves) = &curves else {
+            for (k, d) in d.iter_mut().enumerate().take(3) {
+                *d = size_derivatives(
+                    &shape_array,
+                    k,
+                    cells.centres[j],
+                    cells.normals[j],
+                    rotation,
+                    q,
+                )
+                .1;
+            }
+            return d;
+        };
+        let c = curves.cell(&shape_array, j / grid.1, j % grid.1, cells.normals[j]);
+        for k in 0..6 {
+            d[k] = match q {
+                None => c.log_area[k],
+                Some(q) => d_log_view_weight(
+                    c.log_area[k],
+                    rotation * c.centre[k],
+                    rotation * c.normal[k],
+                    rotation * cells.normals[j],
+                    q,
+                ),
+            };
+        }
+        d
+    };
     let Some((viewpoint, reference)) = sensor else {
         let area: f64 = cells.areas.iter().sum();
         let mut d_log_area = [0.0; 12];
         if with_gradient {
             for j in 0..cells.areas.len() {
-                for (k, d) in d_log_area.iter_mut().enumerate().take(3) {
-                    let (_, d_log) = size_derivatives(
-                        &shape_array,
-                        k,
-                        cells.centres[j],
-                        cells.normals[j],
-                        rotation,
-                        None,
-                    );
-                    *d += cells.areas[j] * d_log / area;
+                let d_log = d_log_weight(j, None);
+                for k in 0..analytic {
+                    d_log_area[k] += cells.areas[j] * d_log[k] / area;
                 }
             }
-            for (k, d) in d_log_area.iter_mut().enumerate().take(6).skip(3) {
+            for (k, d) in d_log_area.iter_mut().enumerate().take(6).skip(analytic) {
                 let (moved, step) = moved(k);
                 *d = (moved.areas.iter().sum::<f64>() / area - 1.0) / step;
             }
@@ -214,16 +245,9 @@ pub fn normaliser(
                 continue;
             }
             let q = world_cells[j] - viewpoint;
-            for (k, d) in d_log_area.iter_mut().enumerate().take(3) {
-                let (_, d_log) = size_derivatives(
-                    &shape_array,
-                    k,
-                    cells.centres[j],
-                    cells.normals[j],
-                    rotation,
-                    Some(q),
-                );
-                *d += share * d_log;
+            let d_log = d_log_weight(j, Some(q));
+            for k in 0..analytic {
+                d_log_area[k] += share * d_log[k];
             }
             let n = world_normals[j];
             let (nq, q2) = (n.dot(q), q.length_squared());
@@ -235,7 +259,7 @@ pub fn normaliser(
                 d_log_area[9 + k] += share * by_turn[k];
             }
         }
-        for (k, d) in d_log_area.iter_mut().enumerate().take(6).skip(3) {
+        for (k, d) in d_log_area.iter_mut().enumerate().take(6).skip(analytic) {
             let (moved, step) = moved(k);
             let (c2, n2) = world(&moved, rotation, translation);
             *d = (density(&moved.areas, &c2, &n2) / area - 1.0) / step;
