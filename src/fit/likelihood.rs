@@ -41,7 +41,7 @@
 mod derivatives;
 pub(crate) mod visibility;
 
-pub(crate) use derivatives::{Curves, d_log_view_weight, size_derivatives};
+pub(crate) use derivatives::{Curves, d_log_view_weight};
 
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};
@@ -429,7 +429,7 @@ impl Problem<'_> {
         let mut d_log_area = [0.0; 6];
         if with_derivatives {
             // (each kept cell's six derivatives in closed form, `derivatives`)
-            let curves = Curves::new(&shape, rings, sectors);
+            let curves = Curves::new(&shape, (0.0, std::f64::consts::TAU), rings, sectors);
             let per_cell: Vec<([DVec3; 6], [f64; 6])> = kept
                 .par_iter()
                 .map(|&j| {

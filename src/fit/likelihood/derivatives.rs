@@ -5,7 +5,7 @@
 //! from the cross product of its diagonals.
 
 use crate::fit::objective::tables::unit_superellipse;
-use glam::{DQuat, DVec3};
+use glam::DVec3;
 
 /// The grid's two curves at a shape, with their derivatives in the exponents: the
 /// section (c, z, dc, dz) per ring boundary (d/d eps1), the top view (x, y, dx, dy) per
@@ -16,11 +16,13 @@ pub(crate) struct Curves {
 }
 
 impl Curves {
-    pub fn new(shape: &[f64; 6], rings: usize, sectors: usize) -> Self {
+    /// The curves of a grid whose `rings` divide the section's polar range `(lo, hi)`
+    /// and whose `sectors` divide the turn.
+    pub fn new(shape: &[f64; 6], (lo, hi): (f64, f64), rings: usize, sectors: usize) -> Self {
         use std::f64::consts::TAU;
         Self {
             section: (0..=rings)
-                .map(|i| unit_superellipse(TAU * i as f64 / rings as f64, shape[4]))
+                .map(|i| unit_superellipse(lo + (hi - lo) * i as f64 / rings as f64, shape[4]))
                 .collect(),
             top: (0..=sectors)
                 .map(|j| unit_superellipse(TAU * j as f64 / sectors as f64, shape[5]))
@@ -34,15 +36,20 @@ impl Curves {
         let [a1, a2, a3, a4, _, _] = *shape;
         let (c, z, dc, dz) = self.section[i];
         let (x, y, dx, dy) = self.top[j];
-        let r = a4 + c;
+        // (an open section's ends lie on the axis: r held at zero there)
+        let (r, dr_da4, dr_deps1) = if a4 + c > 0.0 {
+            (a4 + c, 1.0, dc)
+        } else {
+            (0.0, 0.0, 0.0)
+        };
         (
             DVec3::new(a1 * r * x, a2 * r * y, a3 * z),
             [
                 DVec3::new(r * x, 0.0, 0.0),
                 DVec3::new(0.0, r * y, 0.0),
                 DVec3::new(0.0, 0.0, z),
-                DVec3::new(a1 * x, a2 * y, 0.0),
-                DVec3::new(a1 * dc * x, a2 * dc * y, a3 * dz),
+                DVec3::new(a1 * dr_da4 * x, a2 * dr_da4 * y, 0.0),
+                DVec3::new(a1 * dr_deps1 * x, a2 * dr_deps1 * y, a3 * dz),
                 DVec3::new(a1 * r * dx, a2 * r * dy, 0.0),
             ],
         )
@@ -106,36 +113,4 @@ pub(crate) fn d_log_view_weight(
 ) -> f64 {
     d_log_area + (d_normal.dot(q) + normal.dot(d_centre)) / normal.dot(q)
         - 3.0 * q.dot(d_centre) / q.length_squared()
-}
-
-/// A cell's derivatives in size `k` (a1, a2 or a3) alone, from its canonical centre and
-/// unit normal: d centre (world frame) and d ln of its weight, its area or seen from a
-/// sensor (`sight`: centre - viewpoint, world) its view weight. Scaling size k by s
-/// scales coordinate k of every corner by s, so the centre's, and the cross product of
-/// the diagonals by s in its two other components.
-pub(crate) fn size_derivatives(
-    shape: &[f64; 6],
-    k: usize,
-    centre: DVec3,
-    normal: DVec3,
-    rotation: DQuat,
-    sight: Option<DVec3>,
-) -> (DVec3, f64) {
-    let size = shape[k];
-    let mut d_centre = DVec3::ZERO;
-    d_centre[k] = centre[k] / size;
-    // d N over N's length: the normal with its own component left out, over the size
-    let mut others = normal;
-    others[k] = 0.0;
-    let others = others / size;
-    let d_log_area = normal.dot(others);
-    let d_world = rotation * d_centre;
-    let Some(q) = sight else {
-        return (d_world, d_log_area);
-    };
-    let d_normal = rotation * (others - normal * d_log_area);
-    (
-        d_world,
-        d_log_view_weight(d_log_area, d_world, d_normal, rotation * normal, q),
-    )
 }

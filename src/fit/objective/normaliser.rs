@@ -9,7 +9,7 @@
 //! so the density they integrate is the one A normalises.
 
 use super::tables::{section_range, unit_superellipse};
-use crate::fit::likelihood::{Curves, d_log_view_weight, size_derivatives, visibility::View};
+use crate::fit::likelihood::{Curves, d_log_view_weight, visibility::View};
 use crate::model::Shape;
 use glam::{DQuat, DVec3};
 use std::f64::consts::TAU;
@@ -131,145 +131,134 @@ pub fn normaliser(
     held: Option<&[bool]>,
     with_gradient: bool,
 ) -> Normaliser {
-    let (lo, hi, _) = section_range(shape);
-    let unit = UnitCurves::new(shape, grid);
-    let cells = Cells::new(shape, &unit);
-    // the cells with shape parameter k (a4 or an exponent) moved by a small step (a4
-    // moves the end of an open section, so the unit curves are made again)
-    let shape_array = shape.to_array();
-    let moved = |k: usize| {
-        let mut v = shape_array;
-        let step = 1e-6 * v[k].abs().max(1e-2);
-        v[k] += step;
-        let moved = Shape::from_array(v);
-        let cells = Cells::new(&moved, &UnitCurves::new(&moved, grid));
-        (cells, step)
-    };
-    // d ln of cell j's weight (its area, or seen along q = centre - viewpoint its
-    // density) in the shape parameters known in closed form: all six on a closed section
-    // (a4 >= 1: the grid's corners are the grid model's, `likelihood::derivatives`), the
-    // sizes alone on an open one, whose ends move with a4 and eps1 (those by differences)
-    let curves =
-        (with_gradient && shape.a4 >= 1.0).then(|| Curves::new(&shape_array, grid.0, grid.1));
-    let analytic = if curves.is_some() { 6 } else { 3 };
-    let d_log_weight = |j: usize, q: Option<DVec3>| -> [f64; 6] {
-        let mut d = [0.0; 6];
-        let Some(curves) = &curves else {
-            for (k, d) in d.iter_mut().enumerate().take(3) {
-                *d = size_derivatives(
-                    &shape_array,
-                    k,
-                    cells.centres[j],
-                    cells.normals[j],
-                    rotation,
-                    q,
-                )
-                .1;
-            }
-            return d;
-        };
-        let c = curves.cell(&shape_array, j / grid.1, j % grid.1, cells.normals[j]);
-        for k in 0..6 {
-            d[k] = match q {
-                None => c.log_area[k],
-                Some(q) => d_log_view_weight(
-                    c.log_area[k],
-                    rotation * c.centre[k],
-                    rotation * c.normal[k],
-                    rotation * cells.normals[j],
-                    q,
-                ),
-            };
-        }
-        d
-    };
-    let Some((viewpoint, reference)) = sensor else {
-        let area: f64 = cells.areas.iter().sum();
-        let mut d_log_area = [0.0; 12];
-        if with_gradient {
-            for j in 0..cells.areas.len() {
-                let d_log = d_log_weight(j, None);
-                for k in 0..analytic {
-                    d_log_area[k] += cells.areas[j] * d_log[k] / area;
-                }
-            }
-            for (k, d) in d_log_area.iter_mut().enumerate().take(6).skip(analytic) {
-                let (moved, step) = moved(k);
-                *d = (moved.areas.iter().sum::<f64>() / area - 1.0) / step;
-            }
-        }
-        return Normaliser {
-            area,
-            d_log_area,
-            visible: None,
-            range: (lo, hi),
-            grid,
-        };
-    };
-    let world = |cells: &Cells, rotation: DQuat, translation: DVec3| -> (Vec<DVec3>, Vec<DVec3>) {
-        (
-            cells
-                .centres
-                .iter()
-                .map(|c| rotation * *c + translation)
-                .collect(),
-            cells.normals.iter().map(|n| rotation * *n).collect(),
-        )
-    };
-    let (world_cells, world_normals) = world(&cells, rotation, translation);
-    let visible: Vec<bool> = match held {
+    let (lo, hi, closed) = section_range(shape);
+    let cells = Cells::new(shape, &UnitCurves::new(shape, grid));
+    let world_cells: Vec<DVec3> = cells
+        .centres
+        .iter()
+        .map(|c| rotation * *c + translation)
+        .collect();
+    let world_normals: Vec<DVec3> = cells.normals.iter().map(|n| rotation * *n).collect();
+    let visible = sensor.map(|(viewpoint, _)| match held {
         Some(held) if held.len() == cells.areas.len() => held.to_vec(),
         _ => View::unoccluded(&world_cells, &cells.areas, &world_normals, grid, viewpoint),
-    };
-    // a cell's density: its area times cos(incidence) / range², relative to the reference
-    let density_of = |area: f64, cell: DVec3, normal: DVec3| -> f64 {
+    });
+    // each cell's weight: its area, or seen by the sensor its density of points,
+    // cos(incidence) / range² relative to the reference (zero where it does not see)
+    let weight = |j: usize, area: f64, cell: DVec3, normal: DVec3| -> f64 {
+        let Some((viewpoint, reference)) = sensor else {
+            return area;
+        };
+        if !visible.as_ref().is_some_and(|v| v[j]) {
+            return 0.0;
+        }
         let q = cell - viewpoint;
         let range2 = q.length_squared();
         let cos = (-normal.dot(q)).max(0.0) / range2.sqrt();
         area * cos * reference / range2
     };
-    let density = |areas: &[f64], cells: &[DVec3], normals: &[DVec3]| -> f64 {
-        (0..cells.len())
-            .filter(|&j| visible[j])
-            .map(|j| density_of(areas[j], cells[j], normals[j]))
-            .sum()
-    };
-    let area = density(&cells.areas, &world_cells, &world_normals).max(1e-300);
+    let weights: Vec<f64> = (0..cells.areas.len())
+        .map(|j| weight(j, cells.areas[j], world_cells[j], world_normals[j]))
+        .collect();
+    let area = weights.iter().sum::<f64>().max(1e-300);
     let mut d_log_area = [0.0; 12];
     if with_gradient {
-        // the sizes and the pose in closed form (ln density = ln area + ln(-n·q) - 3 ln|q|,
-        // q = centre - viewpoint: as the grid model's view weight, `size_derivatives`)
-        for j in (0..world_cells.len()).filter(|&j| visible[j]) {
-            let share = density_of(cells.areas[j], world_cells[j], world_normals[j]) / area;
-            if share <= 0.0 {
-                continue;
-            }
-            let q = world_cells[j] - viewpoint;
-            let d_log = d_log_weight(j, Some(q));
-            for k in 0..analytic {
-                d_log_area[k] += share * d_log[k];
-            }
-            let n = world_normals[j];
-            let (nq, q2) = (n.dot(q), q.length_squared());
-            let by_shift = n / nq - 3.0 * q / q2;
-            let by_turn = n.cross(translation - viewpoint) / nq
-                - 3.0 * (world_cells[j] - translation).cross(q) / q2;
-            for k in 0..3 {
-                d_log_area[6 + k] += share * by_shift[k];
-                d_log_area[9 + k] += share * by_turn[k];
-            }
-        }
-        for (k, d) in d_log_area.iter_mut().enumerate().take(6).skip(analytic) {
-            let (moved, step) = moved(k);
-            let (c2, n2) = world(&moved, rotation, translation);
-            *d = (density(&moved.areas, &c2, &n2) / area - 1.0) / step;
+        d_log_area = log_area_derivatives(
+            shape,
+            rotation,
+            translation,
+            sensor,
+            grid,
+            &cells,
+            &weights,
+            area,
+        );
+        // an open section's ends move with a4 and eps1: those two by differences of the
+        // grid made again
+        for k in if closed { 3..3 } else { 3..5 } {
+            let mut moved = shape.to_array();
+            let step = 1e-6 * moved[k].abs().max(1e-2);
+            moved[k] += step;
+            let moved = Shape::from_array(moved);
+            let cells = Cells::new(&moved, &UnitCurves::new(&moved, grid));
+            let moved_area: f64 = (0..cells.areas.len())
+                .map(|j| {
+                    let normal = rotation * cells.normals[j];
+                    weight(
+                        j,
+                        cells.areas[j],
+                        rotation * cells.centres[j] + translation,
+                        normal,
+                    )
+                })
+                .sum();
+            d_log_area[k] = (moved_area / area - 1.0) / step;
         }
     }
     Normaliser {
         area,
         d_log_area,
-        visible: Some(visible),
+        visible,
         range: (lo, hi),
         grid,
     }
+}
+
+/// d ln A / d(shape, translation, turn) in closed form, A the sum of the cells' `weights`
+/// (a4 and eps1 of an open section left to the caller). ln weight = ln area, and seen
+/// from a sensor + ln(-n·q) - 3 ln|q|, q = centre - viewpoint; the shape moves each
+/// cell through its corners (`likelihood::derivatives`), the pose through its centre and
+/// normal (a left turn about world axis k, the turn parameters' convention).
+#[allow(clippy::too_many_arguments)]
+fn log_area_derivatives(
+    shape: &Shape,
+    rotation: DQuat,
+    translation: DVec3,
+    sensor: Option<(DVec3, f64)>,
+    (rings, sectors): (usize, usize),
+    cells: &Cells,
+    weights: &[f64],
+    area: f64,
+) -> [f64; 12] {
+    let (lo, hi, _) = section_range(shape);
+    let shape = shape.to_array();
+    let curves = Curves::new(&shape, (lo, hi), rings, sectors);
+    let mut d_log_area = [0.0; 12];
+    for (j, &w) in weights.iter().enumerate() {
+        if w <= 0.0 {
+            continue;
+        }
+        let share = w / area;
+        let d = curves.cell(&shape, j / sectors, j % sectors, cells.normals[j]);
+        let Some((viewpoint, _)) = sensor else {
+            for k in 0..6 {
+                d_log_area[k] += share * d.log_area[k];
+            }
+            continue;
+        };
+        let (cell, normal) = (
+            rotation * cells.centres[j] + translation,
+            rotation * cells.normals[j],
+        );
+        let q = cell - viewpoint;
+        for k in 0..6 {
+            let d_log = d_log_view_weight(
+                d.log_area[k],
+                rotation * d.centre[k],
+                rotation * d.normal[k],
+                normal,
+                q,
+            );
+            d_log_area[k] += share * d_log;
+        }
+        let (nq, q2) = (normal.dot(q), q.length_squared());
+        let by_shift = normal / nq - 3.0 * q / q2;
+        let by_turn =
+            normal.cross(translation - viewpoint) / nq - 3.0 * (cell - translation).cross(q) / q2;
+        for k in 0..3 {
+            d_log_area[6 + k] += share * by_shift[k];
+            d_log_area[9 + k] += share * by_turn[k];
+        }
+    }
+    d_log_area
 }
