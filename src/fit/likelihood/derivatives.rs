@@ -9,7 +9,7 @@ use glam::DVec3;
 
 /// The grid's two curves at a shape, with their derivatives in the exponents: the
 /// section (c, z, dc, dz) per ring boundary (d/d eps1), the top view (x, y, dx, dy) per
-/// sector boundary (d/d eps2), both at the polar angles of [`super::superellipse_polar`].
+/// sector boundary (d/d eps2), both at the polar angles of `grid::superellipse_polar`.
 pub(crate) struct Curves {
     section: Vec<(f64, f64, f64, f64)>,
     top: Vec<(f64, f64, f64, f64)>,
