@@ -45,7 +45,7 @@ pub(crate) mod visibility;
 pub use grid::{CELL_SIGMAS, FINE_SECTION_CELL_SIGMAS, MAX_CELLS};
 use grid::{grid_for, regrid, surface_cells};
 
-pub(crate) use derivatives::{Curves, d_log_view_weight};
+pub(crate) use derivatives::{Curves, d_log_view_weight, d_log_view_weight_pose};
 
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};
@@ -339,22 +339,9 @@ impl Problem<'_> {
         let mut d_log_weights_pose = Vec::new();
         let mut d_log_area_pose = [0.0; 6];
         if let (true, Some(v)) = (with_derivatives, self.viewpoint) {
-            // w = area·|n·q| / |q|³ up to a constant, q = s - v. Moving the body by dt
-            // moves q by dt; turning it by a left rotation vector dr moves q by
-            // dr x (s - t) and n by dr x n, so n·q by dr·(n x (t - v)).
             d_log_weights_pose = kept
                 .iter()
-                .map(|&j| {
-                    let mut d = [0.0; 6];
-                    let (n, q) = (world_normals[j], cells[j] - v);
-                    let (nq, q2) = (n.dot(q), q.length_squared());
-                    let by_turn = n.cross(translation - v) / nq
-                        - 3.0 * (cells[j] - translation).cross(q) / q2;
-                    let by_shift = n / nq - 3.0 * q / q2;
-                    d[..3].copy_from_slice(&by_shift.to_array());
-                    d[3..].copy_from_slice(&by_turn.to_array());
-                    d
-                })
+                .map(|&j| d_log_view_weight_pose(world_normals[j], cells[j], translation, v))
                 .collect();
             for (&j, d) in kept.iter().zip(&d_log_weights_pose) {
                 for k in 0..6 {

@@ -30,6 +30,11 @@ impl Curves {
         }
     }
 
+    /// The grid's sectors (its top view's steps).
+    pub fn sectors(&self) -> usize {
+        self.top.len() - 1
+    }
+
     /// Corner (i, j) of the grid (canonical) and its derivatives in the six shape
     /// parameters a1 a2 a3 a4 eps1 eps2.
     fn corner(&self, shape: &[f64; 6], i: usize, j: usize) -> (DVec3, [DVec3; 6]) {
@@ -113,4 +118,24 @@ pub(crate) fn d_log_view_weight(
 ) -> f64 {
     d_log_area + (d_normal.dot(q) + normal.dot(d_centre)) / normal.dot(q)
         - 3.0 * q.dot(d_centre) / q.length_squared()
+}
+
+/// d ln of a cell's view weight, area · |n·q| / |q|³, in the pose: moving the body by dt
+/// moves q = centre - viewpoint by dt; turning it by a left rotation vector dr moves q by
+/// dr x (centre - t) and n by dr x n, so n·q by dr·(n x (t - v)). The shift's three
+/// partials, then the turn's; `normal` the world unit normal, `centre` the world centre.
+pub(crate) fn d_log_view_weight_pose(
+    normal: DVec3,
+    centre: DVec3,
+    translation: DVec3,
+    viewpoint: DVec3,
+) -> [f64; 6] {
+    let q = centre - viewpoint;
+    let (nq, q2) = (normal.dot(q), q.length_squared());
+    let by_shift = normal / nq - 3.0 * q / q2;
+    let by_turn =
+        normal.cross(translation - viewpoint) / nq - 3.0 * (centre - translation).cross(q) / q2;
+    [
+        by_shift.x, by_shift.y, by_shift.z, by_turn.x, by_turn.y, by_turn.z,
+    ]
 }

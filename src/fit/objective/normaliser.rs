@@ -9,7 +9,7 @@
 //! so the density they integrate is the one A normalises.
 
 use super::tables::{section_range, unit_superellipse};
-use crate::fit::likelihood::{Curves, d_log_view_weight, visibility::View};
+use crate::fit::likelihood::{Curves, d_log_view_weight, d_log_view_weight_pose, visibility::View};
 use crate::model::Shape;
 use glam::{DQuat, DVec3};
 use std::f64::consts::TAU;
@@ -163,16 +163,14 @@ pub fn normaliser(
     let area = weights.iter().sum::<f64>().max(1e-300);
     let mut d_log_area = [0.0; 12];
     if with_gradient {
-        d_log_area = log_area_derivatives(
-            shape,
+        let world = World {
             rotation,
             translation,
-            sensor,
-            grid,
-            &cells,
-            &weights,
-            area,
-        );
+            cells: &world_cells,
+            normals: &world_normals,
+        };
+        let curves = Curves::new(&shape.to_array(), (lo, hi), grid.0, grid.1);
+        d_log_area = log_area_derivatives(shape, &curves, &cells, &world, sensor, &weights, area);
         // an open section's ends move with a4 and eps1: those two by differences of the
         // grid made again
         for k in if closed { 3..3 } else { 3..5 } {
@@ -204,25 +202,30 @@ pub fn normaliser(
     }
 }
 
+/// The grid's cells in the world: the pose and each cell's centre and unit normal.
+struct World<'a> {
+    rotation: DQuat,
+    translation: DVec3,
+    cells: &'a [DVec3],
+    normals: &'a [DVec3],
+}
+
 /// d ln A / d(shape, translation, turn) in closed form, A the sum of the cells' `weights`
 /// (a4 and eps1 of an open section left to the caller). ln weight = ln area, and seen
 /// from a sensor + ln(-n·q) - 3 ln|q|, q = centre - viewpoint; the shape moves each
-/// cell through its corners (`likelihood::derivatives`), the pose through its centre and
-/// normal (a left turn about world axis k, the turn parameters' convention).
-#[allow(clippy::too_many_arguments)]
+/// cell through its corners (`curves`, `likelihood::derivatives`), the pose through its
+/// centre and normal (a left turn about world axis k, the turn parameters' convention).
 fn log_area_derivatives(
     shape: &Shape,
-    rotation: DQuat,
-    translation: DVec3,
-    sensor: Option<(DVec3, f64)>,
-    (rings, sectors): (usize, usize),
+    curves: &Curves,
     cells: &Cells,
+    world: &World,
+    sensor: Option<(DVec3, f64)>,
     weights: &[f64],
     area: f64,
 ) -> [f64; 12] {
-    let (lo, hi, _) = section_range(shape);
     let shape = shape.to_array();
-    let curves = Curves::new(&shape, (lo, hi), rings, sectors);
+    let sectors = curves.sectors();
     let mut d_log_area = [0.0; 12];
     for (j, &w) in weights.iter().enumerate() {
         if w <= 0.0 {
@@ -236,28 +239,20 @@ fn log_area_derivatives(
             }
             continue;
         };
-        let (cell, normal) = (
-            rotation * cells.centres[j] + translation,
-            rotation * cells.normals[j],
-        );
-        let q = cell - viewpoint;
+        let (centre, normal) = (world.cells[j], world.normals[j]);
         for k in 0..6 {
             let d_log = d_log_view_weight(
                 d.log_area[k],
-                rotation * d.centre[k],
-                rotation * d.normal[k],
+                world.rotation * d.centre[k],
+                world.rotation * d.normal[k],
                 normal,
-                q,
+                centre - viewpoint,
             );
             d_log_area[k] += share * d_log;
         }
-        let (nq, q2) = (normal.dot(q), q.length_squared());
-        let by_shift = normal / nq - 3.0 * q / q2;
-        let by_turn =
-            normal.cross(translation - viewpoint) / nq - 3.0 * (cell - translation).cross(q) / q2;
-        for k in 0..3 {
-            d_log_area[6 + k] += share * by_shift[k];
-            d_log_area[9 + k] += share * by_turn[k];
+        let pose = d_log_view_weight_pose(normal, centre, world.translation, viewpoint);
+        for k in 0..6 {
+            d_log_area[6 + k] += share * pose[k];
         }
     }
     d_log_area
