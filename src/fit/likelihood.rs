@@ -302,13 +302,13 @@ impl Problem<'_> {
             Some(_) => (0..cells.len()).filter(|&j| areas[j] > 0.0).collect(),
             None => (0..cells.len()).collect(),
         };
-        let mut d_cells = Vec::with_capacity(kept.len());
-        let mut d_log_areas = Vec::with_capacity(kept.len());
+        let mut d_cells = Vec::new();
+        let mut d_log_areas = Vec::new();
         let mut d_log_area = [0.0; 6];
         if with_derivatives {
             // (each kept cell's six derivatives in closed form, `derivatives`)
             let curves = Curves::new(&shape, (0.0, std::f64::consts::TAU), rings, sectors);
-            let per_cell: Vec<([DVec3; 6], [f64; 6])> = kept
+            (d_cells, d_log_areas) = kept
                 .par_iter()
                 .map(|&j| {
                     let d = curves.cell(&shape, j / sectors, j % sectors, normals[j]);
@@ -327,13 +327,11 @@ impl Problem<'_> {
                     }
                     (d_world, d_log)
                 })
-                .collect();
-            for (&j, (d_world, d_log)) in kept.iter().zip(&per_cell) {
+                .unzip();
+            for (&j, d_log) in kept.iter().zip(&d_log_areas) {
                 for k in 0..6 {
                     d_log_area[k] += areas[j] * d_log[k] / area;
                 }
-                d_cells.push(*d_world);
-                d_log_areas.push(*d_log);
             }
         }
         let mut d_log_weights_pose = Vec::new();
