@@ -146,6 +146,30 @@ fn the_surface_route_answers_grids_parameters_and_nearest_points() {
     assert!((DVec3::from_array(p) - DVec3::new(0.0, 1.0, 5.0)).length() < 1e-9);
 }
 
+/// An object whose sizes and exponents overflow the surface's quantities (found by
+/// schemathesis) is refused with its code, never answered with nulls for numbers.
+#[test]
+fn an_object_whose_surface_overflows_is_refused() {
+    let s = server();
+    let object = json!({
+        "shape": {"a1": 7.6e15, "a2": 3.2e16, "a3": 4.8e16, "a4": 4.8e16,
+                  "eps1": 2.8e-264, "eps2": 3.6e-283},
+        "pose": {"translation": [0.0, 0.0, -3.7e16], "quaternion_wxyz": [0.16, 0.66, 0.5, 0.5]}
+    });
+    let points = json!([
+        [0.0, 0.0, 0.0],
+        [-4.3e16, -2.4e245, -7.1e59],
+        [-2.6e16, -2.3e16, -6.8e16]
+    ]);
+    let (status, body) = post(
+        &s,
+        "/v1/surface",
+        &json!({"object": object, "points": points}),
+    );
+    assert!(status == 422, "{status}: {body}");
+    assert_eq!(body["error"]["code"], "invalid_object", "{body}");
+}
+
 #[test]
 fn bad_objects_queries_and_grippers_get_their_own_codes() {
     let s = server();

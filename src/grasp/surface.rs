@@ -45,6 +45,19 @@ pub struct SurfacePoint {
     pub seam: bool,
 }
 
+impl SurfacePoint {
+    /// Whether every quantity is a finite number.
+    pub fn is_finite(&self) -> bool {
+        [self.eta, self.omega]
+            .iter()
+            .chain(&self.point)
+            .chain(&self.normal)
+            .chain(&self.curvatures)
+            .chain(self.directions.iter().flatten())
+            .all(|v| v.is_finite())
+    }
+}
+
 /// Moves an angle off the nearest multiple of pi/2 when within [`SEAM_OFFSET`] of it.
 fn off_seam(angle: f64) -> (f64, bool) {
     let quarter = (angle / FRAC_PI_2).round() * FRAC_PI_2;

@@ -152,6 +152,15 @@ pub async fn surface(
         .map_err(invalid("invalid_object"))?;
     // thousands of points take milliseconds to seconds: off the async workers
     let points = off_the_workers(move || surface_points(&request, &shape, &pose)).await??;
+    // an object of extreme sizes or exponents overflows the surface's quantities: refused
+    // rather than answered with nulls where numbers belong
+    if let Some(p) = points.iter().find(|p| !p.is_finite()) {
+        return Err(invalid("invalid_object")(format!(
+            "the surface's quantities at eta {}, omega {} are not finite: the object's sizes or \
+             exponents are out of the range this model can be evaluated in",
+            p.eta, p.omega
+        )));
+    }
     Ok(Json(SurfaceResponse {
         request_id: id.0,
         points,
