@@ -149,7 +149,7 @@ impl Buckets {
         };
         // (every centre lies in the box by construction)
         let keys: Vec<usize> = centres
-            .iter()
+            .par_iter()
             .map(|p| buckets.index(buckets.coords(*p)).unwrap_or(0))
             .collect();
         for &k in &keys {
@@ -280,13 +280,13 @@ impl Problem<'_> {
         let rotation = self.rotation(x);
         let translation = DVec3::new(x[6], x[7], x[8]);
         let cells: Vec<DVec3> = canonical
-            .iter()
+            .par_iter()
             .map(|p| rotation * *p + translation)
             .collect();
         // seen from a viewpoint, a cell's share is its area times its view weight (the
         // visibility found once here)
         let world_normals: Vec<DVec3> = match self.viewpoint {
-            Some(_) => normals.iter().map(|n| rotation * *n).collect(),
+            Some(_) => normals.par_iter().map(|n| rotation * *n).collect(),
             None => Vec::new(),
         };
         let view = self
@@ -299,7 +299,10 @@ impl Problem<'_> {
         let area: f64 = areas.iter().sum();
         let bounds = bounding_box(&cells);
         let kept: Vec<usize> = match view {
-            Some(_) => (0..cells.len()).filter(|&j| areas[j] > 0.0).collect(),
+            Some(_) => (0..cells.len())
+                .into_par_iter()
+                .filter(|&j| areas[j] > 0.0)
+                .collect(),
             None => (0..cells.len()).collect(),
         };
         let mut d_cells = Vec::new();
@@ -338,7 +341,7 @@ impl Problem<'_> {
         let mut d_log_area_pose = [0.0; 6];
         if let (true, Some(v)) = (with_derivatives, self.viewpoint) {
             d_log_weights_pose = kept
-                .iter()
+                .par_iter()
                 .map(|&j| d_log_view_weight_pose(world_normals[j], cells[j], translation, v))
                 .collect();
             for (&j, d) in kept.iter().zip(&d_log_weights_pose) {
@@ -349,10 +352,7 @@ impl Problem<'_> {
         }
         // (without a viewpoint every cell is kept: no copy)
         let (cells, areas) = match view {
-            Some(_) => (
-                kept.iter().map(|&j| cells[j]).collect(),
-                kept.iter().map(|&j| areas[j]).collect(),
-            ),
+            Some(_) => kept.par_iter().map(|&j| (cells[j], areas[j])).unzip(),
             None => (cells, areas),
         };
         Surface {

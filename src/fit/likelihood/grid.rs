@@ -2,6 +2,7 @@
 //! cell's centre, area and outward normal), and the grid's size for a shape and sigma.
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// The most surface cells; past this the cells grow wider than [`CELL_SIGMAS`] sigmas (the
 /// kernel sum then ripples along the surface by 2·exp(-2 pi² / k²) at k sigmas, 22% at 3).
@@ -59,16 +60,16 @@ pub(super) fn surface_cells(
     // whose outward direction is away from its section's centre on the x axis)
     let (c, _, n) = cell(0, 0);
     let inward = n.dot(c - DVec3::new(a1 * a4, 0.0, 0.0)) < 0.0;
-    let count = rings * sectors;
-    let mut centres = Vec::with_capacity(count);
-    let mut areas = Vec::with_capacity(count);
-    let mut normals = Vec::with_capacity(count);
-    let mut push = |(centre, area, normal): (DVec3, f64, DVec3)| {
-        centres.push(centre);
-        areas.push(area);
-        normals.push(if inward { -normal } else { normal });
-    };
-    (0..rings).for_each(|i| (0..sectors).for_each(|j| push(cell(i, j))));
+    let cells: Vec<(DVec3, f64, DVec3)> = (0..rings * sectors)
+        .into_par_iter()
+        .map(|k| cell(k / sectors, k % sectors))
+        .collect();
+    let centres = cells.iter().map(|c| c.0).collect();
+    let areas = cells.iter().map(|c| c.1).collect();
+    let normals = cells
+        .iter()
+        .map(|&(_, _, normal)| if inward { -normal } else { normal })
+        .collect();
     (centres, areas, normals)
 }
 

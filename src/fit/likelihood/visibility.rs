@@ -57,6 +57,7 @@ impl View {
         rotation: DQuat,
     ) -> Vec<f64> {
         (0..cells.len())
+            .into_par_iter()
             .map(|j| self.weight(j, areas[j], cells[j], normals[j], rotation))
             .collect()
     }
@@ -116,7 +117,7 @@ pub(crate) fn visibility(
     let distance = (centre - viewpoint).length().max(1e-9);
     // (screen u, screen w, depth along `forward`)
     let projected: Vec<Option<(f64, f64, f64)>> = cells
-        .iter()
+        .par_iter()
         .map(|s| {
             let q = *s - viewpoint;
             let depth = q.dot(forward);
@@ -125,7 +126,7 @@ pub(crate) fn visibility(
         .collect();
     // each cell's incidence cosine, positive where it faces the sensor (outward normals)
     let incidence: Vec<f64> = cells
-        .iter()
+        .par_iter()
         .zip(normals)
         .map(|(cell, normal)| {
             let q = *cell - viewpoint;
@@ -192,6 +193,7 @@ pub(crate) fn visibility(
         })
         .unwrap_or_default();
     (0..m)
+        .into_par_iter()
         .map(|j| {
             let Some(p) = projected[j] else { return false };
             if facing_only && !facing[j] {

@@ -12,6 +12,7 @@ use super::tables::{section_range, unit_superellipse};
 use crate::fit::likelihood::{Curves, d_log_view_weight, d_log_view_weight_pose, visibility::View};
 use crate::model::Shape;
 use glam::{DQuat, DVec3};
+use rayon::prelude::*;
 use std::f64::consts::TAU;
 
 /// The normaliser's grids, rings along the section by sectors about the axis: the one a
@@ -226,33 +227,38 @@ fn log_area_derivatives(
 ) -> [f64; 12] {
     let shape = shape.to_array();
     let sectors = curves.sectors();
-    let mut d_log_area = [0.0; 12];
-    for (j, &w) in weights.iter().enumerate() {
-        if w <= 0.0 {
-            continue;
-        }
-        let share = w / area;
-        let d = curves.cell(&shape, j / sectors, j % sectors, cells.normals[j]);
-        let Some((viewpoint, _)) = sensor else {
+    // each weighed cell's d ln weight, side by side; summed in the cells' order below
+    let per_cell: Vec<(f64, [f64; 12])> = (0..weights.len())
+        .into_par_iter()
+        .filter(|&j| weights[j] > 0.0)
+        .map(|j| {
+            let d = curves.cell(&shape, j / sectors, j % sectors, cells.normals[j]);
+            let mut d_log = [0.0; 12];
+            let Some((viewpoint, _)) = sensor else {
+                d_log[..6].copy_from_slice(&d.log_area);
+                return (weights[j], d_log);
+            };
+            let (centre, normal) = (world.cells[j], world.normals[j]);
             for k in 0..6 {
-                d_log_area[k] += share * d.log_area[k];
+                d_log[k] = d_log_view_weight(
+                    d.log_area[k],
+                    world.rotation * d.centre[k],
+                    world.rotation * d.normal[k],
+                    normal,
+                    centre - viewpoint,
+                );
             }
-            continue;
-        };
-        let (centre, normal) = (world.cells[j], world.normals[j]);
-        for k in 0..6 {
-            let d_log = d_log_view_weight(
-                d.log_area[k],
-                world.rotation * d.centre[k],
-                world.rotation * d.normal[k],
-                normal,
-                centre - viewpoint,
-            );
-            d_log_area[k] += share * d_log;
-        }
-        let pose = d_log_view_weight_pose(normal, centre, world.translation, viewpoint);
-        for k in 0..6 {
-            d_log_area[6 + k] += share * pose[k];
+            let pose = d_log_view_weight_pose(normal, centre, world.translation, viewpoint);
+            d_log[6..].copy_from_slice(&pose);
+            (weights[j], d_log)
+        })
+        .collect();
+    let mut d_log_area = [0.0; 12];
+    for (w, d_log) in per_cell {
+        let share = w / area;
+        let used = if sensor.is_some() { 12 } else { 6 };
+        for k in 0..used {
+            d_log_area[k] += share * d_log[k];
         }
     }
     d_log_area

@@ -31,6 +31,7 @@ mod rounds;
 use super::*;
 use crate::eval::Normalization;
 use crate::fit::objective::{self, Data, Sensor};
+use rayon::prelude::*;
 
 /// Least-squares iterations of round 1 (starts a few iterations apart have found their
 /// basins; the rest is round 2's).
@@ -226,27 +227,36 @@ fn scored(
 ) -> Result<Vec<Scored>, FitError> {
     let candidates: Vec<Candidate> = solutions.iter().map(|s| s.candidate).collect();
     let residuals = evaluator.residuals_on(&candidates, sets)?;
+    // (a candidate's residuals are as many as its set's points on the evaluator,
+    // whatever sample it is scored on)
+    let mut offsets = Vec::with_capacity(sets.len());
     let mut offset = 0;
-    let mut out = Vec::with_capacity(solutions.len());
-    for (solution, &set) in solutions.iter().zip(sets) {
-        // (a candidate's residuals are as many as its set's points on the evaluator,
-        // whatever sample it is scored on)
-        let n = uploaded(&group[set].1);
-        let sigma = robust_scale(&residuals[offset..offset + n]);
-        offset += n;
-        out.push(Scored {
-            candidate: solution.candidate,
-            sigma,
-            score: samples[set].score(&solution.candidate, sigma),
-            cost: solution.cost,
-            iterations: solution.iterations,
-            modelled: false,
-            overreaches: group[set]
-                .1
-                .overreaches(&solution.candidate, &group[set].1.stage2_pts),
-        });
+    for &set in sets {
+        offsets.push(offset);
+        offset += uploaded(&group[set].1);
     }
-    Ok(out)
+    // (candidates scored side by side: an evaluation's own parallel part is its point
+    // sums, and a few hundred points leave a core idle)
+    Ok(solutions
+        .par_iter()
+        .zip(sets)
+        .zip(offsets)
+        .map(|((solution, &set), offset)| {
+            let n = uploaded(&group[set].1);
+            let sigma = robust_scale(&residuals[offset..offset + n]);
+            Scored {
+                candidate: solution.candidate,
+                sigma,
+                score: samples[set].score(&solution.candidate, sigma),
+                cost: solution.cost,
+                iterations: solution.iterations,
+                modelled: false,
+                overreaches: group[set]
+                    .1
+                    .overreaches(&solution.candidate, &group[set].1.stage2_pts),
+            }
+        })
+        .collect())
 }
 
 /// The best `keep` of one cloud's candidates in distinct basins, most likely first.

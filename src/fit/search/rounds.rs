@@ -89,7 +89,7 @@ pub(super) fn round1(
             .map(|(_, p)| Sample::new(&p.stage1_pts, None, false))
             .collect();
         scored1
-            .iter()
+            .par_iter()
             .zip(&live_sets)
             .map(|(c, &set)| Scored {
                 score: samples[set].score(&c.candidate, c.sigma),
@@ -274,11 +274,16 @@ fn refine_noisy(
     mid: &Sample,
     noise: f64,
 ) -> Result<Vec<Scored>, FitError> {
+    // (side by side: see `scored`)
+    let modelled: Vec<Option<Scored>> = kept
+        .par_iter()
+        .map(|c| likelihood_candidate(p, mid, *c, noise))
+        .collect();
     let mut refined = Vec::with_capacity(kept.len() + 1);
-    for c in kept {
+    for (c, r) in kept.iter().zip(modelled) {
         // (a candidate whose likelihood collapses converges by robust least squares
         // instead: left as round 1 left it, ten iterations in, it could still stand)
-        let r = match likelihood_candidate(p, mid, *c, noise) {
+        let r = match r {
             Some(r) => r,
             None => robust_candidate(evaluator, p, mid, cloud, *c, ROUND1_SHORTFALL)?,
         };
@@ -318,7 +323,7 @@ pub(super) fn finalists(
     dropped: &[bool],
 ) -> Vec<(Scored, usize)> {
     group
-        .iter()
+        .par_iter()
         .enumerate()
         .map(|(cloud, (_, p))| {
             let best = best2[cloud];
@@ -332,7 +337,7 @@ pub(super) fn finalists(
                 .collect();
             let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
             let mut converged: Vec<Scored> = most_likely_distinct(close, 2)
-                .into_iter()
+                .into_par_iter()
                 .map(|c| converge(p, &sample, c, REFINE_ITERATIONS))
                 .collect();
             converged.sort_by(|a, b| a.rank(b));
