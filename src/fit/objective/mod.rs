@@ -271,6 +271,8 @@ struct Window<'a> {
     /// and its distance from the axis
     polar: Vec<f64>,
     radius: Vec<f64>,
+    /// per sweep sample: C x D, its point across its tangent step
+    cross: Vec<f64>,
     normaliser: &'a Normaliser,
     var: f64,
     cut: f64,
@@ -289,7 +291,14 @@ impl<'a> Window<'a> {
             .map(|[x, y]| y.atan2(*x).rem_euclid(TAU))
             .collect();
         let radius = sweep.point.iter().map(|[x, y]| x.hypot(*y)).collect();
+        let cross = sweep
+            .point
+            .iter()
+            .zip(&sweep.tangent)
+            .map(|([cx, cy], [dx, dy])| cx * dy - cy * dx)
+            .collect();
         Self {
+            cross,
             shape: *shape,
             polar,
             radius,
@@ -342,12 +351,12 @@ impl<'a> Window<'a> {
     /// Adds the partials of ln(element weight) in the shape (past ln lambda's) to
     /// `log_weight`, and the element's share of d sum / d sight (`term` its kernel term)
     /// to `by_sight`: section node k by sweep sample m, its area without a sight line,
-    /// seen along `sight` its projected area.
+    /// seen along `sight` its projected area (its halves' n·v, `facing`).
     fn add_log_weight_partials(
         &self,
         k: usize,
         m: usize,
-        sight: Option<DVec3>,
+        sight: Option<(DVec3, [f64; 2])>,
         term: f64,
         log_weight: &mut [f64; 6],
         by_sight: &mut DVec3,
@@ -355,14 +364,13 @@ impl<'a> Window<'a> {
         let Shape { a1, a2, a3, .. } = self.shape;
         let [cx, cy] = self.sweep.point[m];
         let [dx, dy] = self.sweep.tangent[m];
-        let cross = cx * dy - cy * dx;
+        let cross = self.cross[m];
         let [dcx, dcy] = self.sweep.d_point[m];
         let [ddx, ddy] = self.sweep.d_tangent[m];
         let d_cross = dcx * dy + cx * ddy - dcy * dx - cy * ddx;
         match sight {
-            Some(v) => {
+            Some((v, facing)) => {
                 // d ln sum_h (-facing_h) over the halves that face the sensor
-                let facing = self.half_facing(k, dx, dy, cross, v);
                 let total: f64 = facing.iter().map(|f| (-f).max(0.0)).sum();
                 let turn = dy * v.x - dx * v.y;
                 for h in 0..2 {
@@ -464,18 +472,19 @@ impl<'a> Window<'a> {
                         continue;
                     }
                     let [dx, dy] = self.sweep.tangent[m];
-                    let cross = cx * dy - cy * dx;
+                    let cross = self.cross[m];
                     // the surface element's weight: its area, or seen by the sensor its
                     // projected area lambda·(-n·v)/|v|, n = (a3 tw dy, -a3 tw dx, -tc cross)
                     // (the two halves of the section's step one by one: at a sharp corner
                     // one may face the sensor and the other not, and their areas add up where
                     // the step's own would cut the corner)
+                    let mut facing = [0.0; 2];
                     let weight = match sight {
                         Some(v) => {
                             if !self.normaliser.sees(self.rings[k], self.sectors[m]) {
                                 continue;
                             }
-                            let facing = self.half_facing(k, dx, dy, cross, v);
+                            facing = self.half_facing(k, dx, dy, cross, v);
                             let projected = facing.iter().map(|f| (-f).max(0.0)).sum::<f64>();
                             if projected <= 0.0 {
                                 continue;
@@ -515,7 +524,7 @@ impl<'a> Window<'a> {
                     self.add_log_weight_partials(
                         k,
                         m,
-                        sight,
+                        sight.map(|v| (v, facing)),
                         term,
                         &mut log_weight,
                         &mut out.by_sight,
