@@ -43,9 +43,10 @@ mod grid;
 pub(crate) mod visibility;
 
 pub use grid::{CELL_SIGMAS, FINE_SECTION_CELL_SIGMAS, MAX_CELLS};
+pub(crate) use grid::{Cells, Curves};
 use grid::{grid_for, regrid, surface_cells};
 
-pub(crate) use derivatives::{Curves, d_log_view_weight, d_log_view_weight_pose};
+pub(crate) use derivatives::{d_log_view_weight, d_log_view_weight_pose};
 
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};
@@ -276,7 +277,12 @@ impl Problem<'_> {
     fn surface(&self, x: &Vector, with_derivatives: bool) -> Surface {
         let shape = Self::shape(x);
         let (rings, sectors) = self.grid;
-        let (canonical, areas, normals) = surface_cells(&shape, rings, sectors);
+        let curves = Curves::new(&shape, (0.0, std::f64::consts::TAU), rings, sectors);
+        let Cells {
+            centres: canonical,
+            areas,
+            normals,
+        } = curves.cells(&shape);
         let rotation = self.rotation(x);
         let translation = DVec3::new(x[6], x[7], x[8]);
         let cells: Vec<DVec3> = canonical
@@ -310,7 +316,6 @@ impl Problem<'_> {
         let mut d_log_area = [0.0; 6];
         if with_derivatives {
             // (each kept cell's six derivatives in closed form, `derivatives`)
-            let curves = Curves::new(&shape, (0.0, std::f64::consts::TAU), rings, sectors);
             (d_cells, d_log_areas) = kept
                 .par_iter()
                 .map(|&j| {

@@ -1,40 +1,13 @@
 //! The surface grid's cells differentiated in the shape in closed form: each corner of
-//! the grid is r_t of eq. (2) at polar angles (`superellipse_polar`), so its derivative
+//! the grid is r_t of eq. (2) at polar angles ([`Curves::point`]), so its derivative
 //! in a size, in a4 or in an exponent is a product of the two curves' points and their
 //! derivatives; a cell's centre is the mean of its corners, its area and normal come
 //! from the cross product of its diagonals.
 
-use crate::fit::objective::tables::unit_superellipse;
+use super::grid::Curves;
 use glam::DVec3;
 
-/// The grid's two curves at a shape, with their derivatives in the exponents: the
-/// section (c, z, dc, dz) per ring boundary (d/d eps1), the top view (x, y, dx, dy) per
-/// sector boundary (d/d eps2), both at the polar angles of `grid::superellipse_polar`.
-pub(crate) struct Curves {
-    section: Vec<(f64, f64, f64, f64)>,
-    top: Vec<(f64, f64, f64, f64)>,
-}
-
 impl Curves {
-    /// The curves of a grid whose `rings` divide the section's polar range `(lo, hi)`
-    /// and whose `sectors` divide the turn.
-    pub fn new(shape: &[f64; 6], (lo, hi): (f64, f64), rings: usize, sectors: usize) -> Self {
-        use std::f64::consts::TAU;
-        Self {
-            section: (0..=rings)
-                .map(|i| unit_superellipse(lo + (hi - lo) * i as f64 / rings as f64, shape[4]))
-                .collect(),
-            top: (0..=sectors)
-                .map(|j| unit_superellipse(TAU * j as f64 / sectors as f64, shape[5]))
-                .collect(),
-        }
-    }
-
-    /// The grid's sectors (its top view's steps).
-    pub fn sectors(&self) -> usize {
-        self.top.len() - 1
-    }
-
     /// Corner (i, j) of the grid (canonical) and its derivatives in the six shape
     /// parameters a1 a2 a3 a4 eps1 eps2.
     fn corner(&self, shape: &[f64; 6], i: usize, j: usize) -> (DVec3, [DVec3; 6]) {
@@ -48,7 +21,7 @@ impl Curves {
             (0.0, 0.0, 0.0)
         };
         (
-            DVec3::new(a1 * r * x, a2 * r * y, a3 * z),
+            self.point(shape, i, j),
             [
                 DVec3::new(r * x, 0.0, 0.0),
                 DVec3::new(0.0, r * y, 0.0),

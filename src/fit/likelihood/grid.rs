@@ -1,8 +1,10 @@
 //! The noise model's surface grid: the surface of eq. (2) on a polar grid of cells (each
 //! cell's centre, area and outward normal), and the grid's size for a shape and sigma.
 
+use crate::fit::objective::tables::unit_superellipse;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::f64::consts::TAU;
 
 /// The most surface cells; past this the cells grow wider than [`CELL_SIGMAS`] sigmas (the
 /// kernel sum then ripples along the surface by 2·exp(-2 pi² / k²) at k sigmas, 22% at 3).
@@ -16,67 +18,97 @@ pub const MAX_CELLS: usize = 24_000;
 /// shape call for, and never coarser ([`refine`](super::refine)).
 const GRID_SLACK: f64 = 0.1;
 
-/// Point on the superellipse |u|^(2/eps) + |v|^(2/eps) = 1 in the polar direction phi.
-/// (The polar angle, unlike the eta/omega of eq. (2), spaces points evenly along flat sides
-/// and round corners alike, within a factor of about sqrt 2 for eps in [0.1, 2].)
-fn superellipse_polar(phi: f64, eps: f64) -> (f64, f64) {
-    let (s, c) = phi.sin_cos();
-    let r = (c.abs().powf(2.0 / eps) + s.abs().powf(2.0 / eps)).powf(-eps / 2.0);
-    (r * c, r * s)
+/// The grid's two curves at a shape, with their derivatives in the exponents: the
+/// section (c, z, dc, dz) per ring boundary (d/d eps1), the top view (x, y, dx, dy) per
+/// sector boundary (d/d eps2), both at polar angles. (The polar angle, unlike the
+/// eta/omega of eq. (2), spaces points evenly along flat sides and round corners alike,
+/// within a factor of about sqrt 2 for eps in [0.1, 2].)
+pub(crate) struct Curves {
+    pub(super) section: Vec<(f64, f64, f64, f64)>,
+    pub(super) top: Vec<(f64, f64, f64, f64)>,
 }
 
-/// The surface of eq. (2) on a `rings` x `sectors` polar grid (canonical frame): each
-/// cell's centre, area and outward unit normal. Separable: the section and top-view superellipses are
-/// evaluated once per row and column.
+/// A grid's cells (canonical, ring-major): centres, areas, outward unit normals.
+pub(crate) struct Cells {
+    pub centres: Vec<DVec3>,
+    pub areas: Vec<f64>,
+    pub normals: Vec<DVec3>,
+}
+
+impl Curves {
+    /// The curves of a grid whose `rings` divide the section's polar range `(lo, hi)`
+    /// and whose `sectors` divide the turn.
+    pub fn new(shape: &[f64; 6], (lo, hi): (f64, f64), rings: usize, sectors: usize) -> Self {
+        Self {
+            section: (0..=rings)
+                .map(|i| unit_superellipse(lo + (hi - lo) * i as f64 / rings as f64, shape[4]))
+                .collect(),
+            top: (0..=sectors)
+                .map(|j| unit_superellipse(TAU * j as f64 / sectors as f64, shape[5]))
+                .collect(),
+        }
+    }
+
+    /// The grid's sectors (its top view's steps).
+    pub fn sectors(&self) -> usize {
+        self.top.len() - 1
+    }
+
+    /// Corner (i, j) of the grid (canonical): r_t of eq. (2) at the two polar angles, an
+    /// open section's ends held on the axis.
+    pub(super) fn point(&self, [a1, a2, a3, a4, _, _]: &[f64; 6], i: usize, j: usize) -> DVec3 {
+        let (c, z, _, _) = self.section[i];
+        let (x, y, _, _) = self.top[j];
+        let r = if a4 + c > 0.0 { a4 + c } else { 0.0 };
+        DVec3::new(a1 * r * x, a2 * r * y, a3 * z)
+    }
+
+    /// The grid's cells: each corner found once, a cell's centre the mean of its four,
+    /// its area and normal from the cross product of its diagonals (outward: the section
+    /// runs anticlockwise in (radius, z), the sweep anticlockwise about z).
+    pub fn cells(&self, shape: &[f64; 6]) -> Cells {
+        let (rings, sectors) = (self.section.len() - 1, self.sectors());
+        let corners: Vec<DVec3> = (0..(rings + 1) * (sectors + 1))
+            .into_par_iter()
+            .map(|k| self.point(shape, k / (sectors + 1), k % (sectors + 1)))
+            .collect();
+        let at = |i: usize, j: usize| corners[i * (sectors + 1) + j];
+        let cells: Vec<(DVec3, f64, DVec3)> = (0..rings * sectors)
+            .into_par_iter()
+            .map(|k| {
+                let (i, j) = (k / sectors, k % sectors);
+                let (c00, c10, c01, c11) = (at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1));
+                let normal = (c11 - c00).cross(c10 - c01);
+                (
+                    (c00 + c10 + c01 + c11) * 0.25,
+                    0.5 * normal.length(),
+                    normal.normalize_or_zero(),
+                )
+            })
+            .collect();
+        Cells {
+            centres: cells.iter().map(|c| c.0).collect(),
+            areas: cells.iter().map(|c| c.1).collect(),
+            normals: cells.iter().map(|c| c.2).collect(),
+        }
+    }
+}
+
+/// The surface of eq. (2) on a `rings` x `sectors` polar grid closed both ways (a
+/// shape with a hole, a4 > 1): each cell's centre, area and outward unit normal.
 pub(super) fn surface_cells(
     shape: &[f64; 6],
     rings: usize,
     sectors: usize,
 ) -> (Vec<DVec3>, Vec<f64>, Vec<DVec3>) {
-    use std::f64::consts::TAU;
-    let [a1, a2, a3, a4, eps1, eps2] = *shape;
-    let section: Vec<(f64, f64)> = (0..=rings)
-        .map(|i| superellipse_polar(TAU * i as f64 / rings as f64, eps1))
-        .collect();
-    let top: Vec<(f64, f64)> = (0..=sectors)
-        .map(|j| superellipse_polar(TAU * j as f64 / sectors as f64, eps2))
-        .collect();
-    let corner = |i: usize, j: usize| {
-        let (c, z) = section[i];
-        let (cw, sw) = top[j];
-        DVec3::new(a1 * (a4 + c) * cw, a2 * (a4 + c) * sw, a3 * z)
-    };
-    let cell = |i: usize, j: usize| {
-        let (c00, c10) = (corner(i, j), corner(i + 1, j));
-        let (c01, c11) = (corner(i, j + 1), corner(i + 1, j + 1));
-        let normal = (c11 - c00).cross(c10 - c01);
-        (
-            (c00 + c10 + c01 + c11) * 0.25,
-            0.5 * normal.length(),
-            normal.normalize_or_zero(),
-        )
-    };
-    // outward normals (the grid's orientation is one for all cells: check the first,
-    // whose outward direction is away from its section's centre on the x axis)
-    let (c, _, n) = cell(0, 0);
-    let inward = n.dot(c - DVec3::new(a1 * a4, 0.0, 0.0)) < 0.0;
-    let cells: Vec<(DVec3, f64, DVec3)> = (0..rings * sectors)
-        .into_par_iter()
-        .map(|k| cell(k / sectors, k % sectors))
-        .collect();
-    let centres = cells.iter().map(|c| c.0).collect();
-    let areas = cells.iter().map(|c| c.1).collect();
-    let normals = cells
-        .iter()
-        .map(|&(_, _, normal)| if inward { -normal } else { normal })
-        .collect();
-    (centres, areas, normals)
+    let cells = Curves::new(shape, (0.0, TAU), rings, sectors).cells(shape);
+    (cells.centres, cells.areas, cells.normals)
 }
 
 /// Perimeter of the superellipse with half-axes (a, b), from a 64-gon.
 fn perimeter(a: f64, b: f64, eps: f64) -> f64 {
     let point = |k: usize| {
-        let (u, v) = superellipse_polar(std::f64::consts::TAU * k as f64 / 64.0, eps);
+        let (u, v, _, _) = unit_superellipse(TAU * k as f64 / 64.0, eps);
         DVec3::new(a * u, b * v, 0.0)
     };
     (0..64).map(|k| (point(k + 1) - point(k)).length()).sum()

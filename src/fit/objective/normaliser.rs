@@ -8,8 +8,10 @@
 //! it minimises does not jump where a cell's visibility flips. The per-point sums look the visibility up in the same grid,
 //! so the density they integrate is the one A normalises.
 
-use super::tables::{section_range, unit_superellipse};
-use crate::fit::likelihood::{Curves, d_log_view_weight, d_log_view_weight_pose, visibility::View};
+use super::tables::section_range;
+use crate::fit::likelihood::{
+    Cells, Curves, d_log_view_weight, d_log_view_weight_pose, visibility::View,
+};
 use crate::model::Shape;
 use glam::{DQuat, DVec3};
 use rayon::prelude::*;
@@ -52,75 +54,6 @@ impl Normaliser {
     }
 }
 
-/// The unit curves of a grid: the section's points (c, w) and the top view's (x, y) at
-/// the rings' and sectors' polar angles.
-struct UnitCurves {
-    section: Vec<(f64, f64)>,
-    top: Vec<(f64, f64)>,
-}
-
-impl UnitCurves {
-    fn new(shape: &Shape, (rings, sectors): (usize, usize)) -> Self {
-        let (lo, hi, _) = section_range(shape);
-        Self {
-            section: (0..=rings)
-                .map(|i| {
-                    let phi = lo + (hi - lo) * i as f64 / rings as f64;
-                    let (c, w, _, _) = unit_superellipse(phi, shape.eps1);
-                    (c, w)
-                })
-                .collect(),
-            top: (0..=sectors)
-                .map(|j| {
-                    let (x, y, _, _) =
-                        unit_superellipse(TAU * j as f64 / sectors as f64, shape.eps2);
-                    (x, y)
-                })
-                .collect(),
-        }
-    }
-}
-
-/// A grid's cells (canonical): centres, areas, outward unit normals.
-struct Cells {
-    centres: Vec<DVec3>,
-    areas: Vec<f64>,
-    normals: Vec<DVec3>,
-}
-
-impl Cells {
-    fn new(shape: &Shape, unit: &UnitCurves) -> Self {
-        let (rings, sectors) = (unit.section.len() - 1, unit.top.len() - 1);
-        let corner = |i: usize, j: usize| {
-            let (c, z) = unit.section[i];
-            let (x, y) = unit.top[j];
-            let r = (shape.a4 + c).max(0.0);
-            DVec3::new(shape.a1 * r * x, shape.a2 * r * y, shape.a3 * z)
-        };
-        let mut cells = Self {
-            centres: Vec::with_capacity(rings * sectors),
-            areas: Vec::with_capacity(rings * sectors),
-            normals: Vec::with_capacity(rings * sectors),
-        };
-        let mut previous: Vec<DVec3> = (0..=sectors).map(|j| corner(0, j)).collect();
-        for i in 0..rings {
-            let next: Vec<DVec3> = (0..=sectors).map(|j| corner(i + 1, j)).collect();
-            for j in 0..sectors {
-                let (c00, c10) = (previous[j], next[j]);
-                let (c01, c11) = (previous[j + 1], next[j + 1]);
-                cells.centres.push((c00 + c10 + c01 + c11) * 0.25);
-                // (the section runs anticlockwise in (radius, z), the sweep anticlockwise
-                // about z: this cross product points outwards)
-                let normal = (c11 - c00).cross(c10 - c01);
-                cells.areas.push(0.5 * normal.length());
-                cells.normals.push(normal.normalize_or_zero());
-            }
-            previous = next;
-        }
-        cells
-    }
-}
-
 /// The normaliser at a shape and pose on a `grid`, seen from `sensor` (viewpoint,
 /// reference squared range) if any; derivatives with `with_gradient`.
 pub fn normaliser(
@@ -133,7 +66,8 @@ pub fn normaliser(
     with_gradient: bool,
 ) -> Normaliser {
     let (lo, hi, closed) = section_range(shape);
-    let cells = Cells::new(shape, &UnitCurves::new(shape, grid));
+    let curves = Curves::new(&shape.to_array(), (lo, hi), grid.0, grid.1);
+    let cells = curves.cells(&shape.to_array());
     let world_cells: Vec<DVec3> = cells
         .centres
         .iter()
@@ -170,7 +104,6 @@ pub fn normaliser(
             cells: &world_cells,
             normals: &world_normals,
         };
-        let curves = Curves::new(&shape.to_array(), (lo, hi), grid.0, grid.1);
         d_log_area = log_area_derivatives(shape, &curves, &cells, &world, sensor, &weights, area);
         // an open section's ends move with a4 and eps1: those two by differences of the
         // grid made again
@@ -178,8 +111,8 @@ pub fn normaliser(
             let mut moved = shape.to_array();
             let step = 1e-6 * moved[k].abs().max(1e-2);
             moved[k] += step;
-            let moved = Shape::from_array(moved);
-            let cells = Cells::new(&moved, &UnitCurves::new(&moved, grid));
+            let (lo, hi, _) = section_range(&Shape::from_array(moved));
+            let cells = Curves::new(&moved, (lo, hi), grid.0, grid.1).cells(&moved);
             let moved_area: f64 = (0..cells.areas.len())
                 .map(|j| {
                     let normal = rotation * cells.normals[j];
