@@ -52,6 +52,9 @@ pub struct Case {
     pub misfit_warning: bool,
     /// whether it carried any warning at all
     pub warned: bool,
+    /// the fit's largest standard error of the shape as a share of the success rule's
+    /// tolerance (`fit::uncertainty`, warned from `WARNING_SHARE`); NaN where none
+    pub uncertainty: f64,
     /// the share of an efficient estimator's fits of this cloud within the tolerances
     /// (`suite::attainable`: the Cramér-Rao bound of its inliers); NaN where it has none
     pub attainable: f64,
@@ -88,6 +91,7 @@ impl Case {
             uncertain_warning: false,
             misfit_warning: false,
             warned: false,
+            uncertainty: f64::NAN,
             attainable: f64::NAN,
             visible_coverage: f64::NAN,
             viewpoint_found: false,
@@ -380,6 +384,11 @@ pub fn run(
                 .iter()
                 .any(|w| w.starts_with("off a precise")),
             warned: !report.warnings.is_empty(),
+            uncertainty: report
+                .quality
+                .standard_errors
+                .as_ref()
+                .map_or(f64::NAN, |e| e.share_of_tolerance()),
             attainable: attainable::suite_case(&case, case_seed).unwrap_or(f64::NAN),
             visible_coverage: report.quality.visible_coverage.unwrap_or(f64::NAN),
             viewpoint_found: report.viewpoint.source == ViewpointSource::FrameOrigin,
@@ -515,11 +524,11 @@ impl Report for SyntheticReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,refused,uncertain_warning,attainable,misfit_warning,visible_coverage,from_truth\n",
+            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,refused,uncertain_warning,attainable,misfit_warning,visible_coverage,from_truth,warned,uncertainty\n",
         );
         for c in &self.cases {
             s += &format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 c.seed,
                 c.partial,
                 c.noise,
@@ -537,7 +546,9 @@ impl Report for SyntheticReport {
                 c.attainable,
                 c.misfit_warning,
                 c.visible_coverage,
-                c.from_truth.map_or(String::new(), |ok| ok.to_string())
+                c.from_truth.map_or(String::new(), |ok| ok.to_string()),
+                c.warned,
+                c.uncertainty
             );
         }
         s
