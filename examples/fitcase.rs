@@ -49,6 +49,14 @@ fn main() {
             r.timing_ms,
             r.warnings.len()
         );
+        if std::env::var("QUALITY").is_ok() {
+            println!(
+                "  median distance / size {:.2e}, noise sigma / size {:.2e}, scatter {:?}",
+                r.quality.median_distance / r.fitted.0.size(),
+                r.quality.noise_sigma / r.fitted.0.size(),
+                supertoroid::fit::scatter::local_scatter(&points).map(|s| s / r.fitted.0.size())
+            );
+        }
         if std::env::var("TRUTH").is_ok() {
             // in the suite's frame
             let norm = Normalization::of(&case.points);
