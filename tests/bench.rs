@@ -267,8 +267,20 @@ fn bench_synthetic_and_scaling_write_every_field() {
                 "uncertain_warning",
                 "misfit_warning",
                 "attainable",
+                "warned",
             ],
         );
+        // the shape's standard errors over their tolerances (null where there are none),
+        // and the uncertain-shape warning among the warnings
+        let uncertainty = c["uncertainty"].as_f64();
+        assert!(uncertainty.is_none_or(|u| u >= 0.0), "{c}");
+        if c["uncertain_warning"] == true {
+            assert_eq!(c["warned"], true, "{c}");
+            assert!(
+                uncertainty.is_some_and(|u| u >= supertoroid::fit::uncertainty::WARNING_SHARE),
+                "{c}"
+            );
+        }
         // the efficient estimator's share (`suite::attainable`): a probability, and
         // certain on a noise-free cloud
         let attainable = c["attainable"].as_f64().unwrap();

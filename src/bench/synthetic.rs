@@ -524,7 +524,7 @@ impl Report for SyntheticReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,refused,uncertain_warning,attainable,misfit_warning,visible_coverage,from_truth,warned,uncertainty\n",
+            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,refused,uncertain_warning,attainable,misfit_warning,visible_coverage,warned,uncertainty,from_truth\n",
         );
         for c in &self.cases {
             s += &format!(
@@ -546,9 +546,9 @@ impl Report for SyntheticReport {
                 c.attainable,
                 c.misfit_warning,
                 c.visible_coverage,
-                c.from_truth.map_or(String::new(), |ok| ok.to_string()),
                 c.warned,
-                c.uncertainty
+                c.uncertainty,
+                c.from_truth.map_or(String::new(), |ok| ok.to_string())
             );
         }
         s

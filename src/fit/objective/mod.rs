@@ -24,9 +24,8 @@
 //! one ([`normaliser`]).
 //!
 //! Parameters: shape a1 a2 a3 a4 eps1 eps2, translation, a rotation vector applied on the
-//! left of the reference rotation (world frame), ln sigma. The gradient is analytic but
-//! for A (differences of its grid); the Hessian is the BHHH outer product of the points'
-//! scores.
+//! left of the reference rotation (world frame), ln sigma. The gradient is analytic (A's
+//! too, [`normaliser`]); the Hessian is the BHHH outer product of the points' scores.
 
 pub mod normaliser;
 mod refine;

@@ -1,12 +1,13 @@
 //! The normaliser A of the likelihood: the surface's area, or seen from a sensor the
 //! integral over the surface it sees of its density of points, cos(incidence) / range²
 //! (relative to a reference range). A is a sum over a coarse grid of the surface (its
-//! integrand is smooth), its derivatives in the sizes and the pose in closed form and in
-//! a4 and the exponents by differences of that grid, the visibility (a
-//! z-buffer of the grid's mesh, `likelihood::visibility`) found where the caller asks
-//! and otherwise held: a refinement holds it through each line search, so the function
-//! it minimises does not jump where a cell's visibility flips. The per-point sums look the visibility up in the same grid,
-//! so the density they integrate is the one A normalises.
+//! integrand is smooth; the cells are `likelihood::Curves::cells`), its derivatives in
+//! closed form through each grid corner's (an open section's a4 and eps1, which move its
+//! ends, by differences of the grid made again), the visibility (a z-buffer of the
+//! grid's mesh, `likelihood::visibility`) found where the caller asks and otherwise held:
+//! a refinement holds it through each line search, so the function it minimises does not
+//! jump where a cell's visibility flips. The per-point sums look the visibility up in the
+//! same grid, so the density they integrate is the one A normalises.
 
 use super::tables::section_range;
 use crate::fit::likelihood::{
