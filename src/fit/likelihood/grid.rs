@@ -68,28 +68,31 @@ impl Curves {
     /// runs anticlockwise in (radius, z), the sweep anticlockwise about z).
     pub fn cells(&self, shape: &[f64; 6]) -> Cells {
         let (rings, sectors) = (self.section.len() - 1, self.sectors());
+        // (split in pieces of at least MIN_PIECE: a coarse grid is a few microseconds' work)
+        const MIN_PIECE: usize = 512;
         let corners: Vec<DVec3> = (0..(rings + 1) * (sectors + 1))
             .into_par_iter()
+            .with_min_len(MIN_PIECE)
             .map(|k| self.point(shape, k / (sectors + 1), k % (sectors + 1)))
             .collect();
         let at = |i: usize, j: usize| corners[i * (sectors + 1) + j];
-        let cells: Vec<(DVec3, f64, DVec3)> = (0..rings * sectors)
+        let (centres, (areas, normals)) = (0..rings * sectors)
             .into_par_iter()
+            .with_min_len(MIN_PIECE)
             .map(|k| {
                 let (i, j) = (k / sectors, k % sectors);
                 let (c00, c10, c01, c11) = (at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1));
                 let normal = (c11 - c00).cross(c10 - c01);
                 (
                     (c00 + c10 + c01 + c11) * 0.25,
-                    0.5 * normal.length(),
-                    normal.normalize_or_zero(),
+                    (0.5 * normal.length(), normal.normalize_or_zero()),
                 )
             })
-            .collect();
+            .unzip();
         Cells {
-            centres: cells.iter().map(|c| c.0).collect(),
-            areas: cells.iter().map(|c| c.1).collect(),
-            normals: cells.iter().map(|c| c.2).collect(),
+            centres,
+            areas,
+            normals,
         }
     }
 }
