@@ -187,11 +187,11 @@ fn log_area_derivatives(
             (weights[j], d_log)
         })
         .collect();
+    // (without a sensor the pose's six stay zero)
     let mut d_log_area = [0.0; 12];
     for (w, d_log) in per_cell {
         let share = w / area;
-        let used = if sensor.is_some() { 12 } else { 6 };
-        for k in 0..used {
+        for k in 0..12 {
             d_log_area[k] += share * d_log[k];
         }
     }
