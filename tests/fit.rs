@@ -497,6 +497,35 @@ fn the_pot_is_not_stretched_over_empty_space() {
     assert!(most >= 9, "only {most} of 10 seeds share a hole axis");
 }
 
+/// The paper's pot read as a view from its frame's origin (how its PCD header and `auto`
+/// read it). Its open top is not in the model; a thin-walled tube (a4 at its bound of 8)
+/// explains that misfit as blur at four times the cloud's own scatter, and the view
+/// likelihood preferred it on 8 seeds of 10 once it refined the pot's thin-walled
+/// candidates. Held to twice the noise the cloud shows (`fit::MAX_SIGMA_GROWTH`), the
+/// pot is refined as a precise cloud: a thick ring close to most of its points.
+#[test]
+fn the_pot_read_as_a_view_is_not_taken_for_a_thin_walled_tube() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/clouds/paper/pot2clean.pcd");
+    let points = supertoroid::io::read_cloud(&path, None)
+        .expect("the paper's clouds live in ../shared/clouds/paper");
+    let mut evaluator = CpuEvaluator::new();
+    for seed in [0, 2, 3] {
+        let o = FitOptions {
+            seed,
+            viewpoint: supertoroid::fit::Viewpoint::Auto,
+            ..FitOptions::default()
+        };
+        let r = fit(&mut evaluator, &points, &o).unwrap();
+        assert!(
+            r.fitted.0.a4 < 4.0 && r.quality.inlier_fraction > 0.6,
+            "seed {seed}: {:?}, {:.2} of the points within 2% of the size",
+            r.fitted.0,
+            r.quality.inlier_fraction
+        );
+    }
+}
+
 /// The paper's pot fitted ten times on the CPU (f64) and on the GPU evaluator (f32): every
 /// run grades the same on both. Its starts have round top views, whose turn about the
 /// hole axis the points do not see; the GPU's rounding once turned them at random and
@@ -1726,9 +1755,10 @@ fn auto_tells_rings_from_boxes_and_cans_on_single_views() {
 /// (the suite's ranges, tall rolls, thin washers, oval rings) through the D435-like
 /// sensor, half with outliers over the scene's box, fitted with no options in the
 /// camera's frame. `examples/broad_views` runs the full benchmark, where the fit gets
-/// about two views in three (seeds 2000000, 2100000 and 2500000); twelve
-/// views of it gave 6 to 8 as the solver's basin choices moved, so half is asked: a fall
-/// below it is a regression, not chance.
+/// about four views in five (seeds 2000000, 2100000, 2900000 and 3000000); these twelve
+/// give 8 (6 with the estimator judged on the likeliest candidate alone, which reads a
+/// thin washer's blurred section as a thick precise one), and the solver's basin choices
+/// have moved such a count by one or two, so 7 are asked.
 #[test]
 fn broadened_views_through_a_depth_sensor_are_fitted_with_no_options() {
     use supertoroid::suite::broad::{FAMILIES, view};
@@ -1748,7 +1778,7 @@ fn broadened_views_through_a_depth_sensor_are_fitted_with_no_options() {
         eprintln!("{seed} ({}): {errors:?}", FAMILIES[(seed % 4) as usize]);
         right += usize::from(errors.success());
     }
-    assert!(right >= 6, "{right} of 12 right (6 asked)");
+    assert!(right >= 7, "{right} of 12 right (7 asked)");
 }
 
 /// The report says what the search tried and kept: a noisy single view in its camera's

@@ -137,10 +137,12 @@ fn sample_of(p: &Prepared, points: &[DVec3], all_round: bool) -> Sample {
 
 /// Round 2: round 1's kept candidates, and the other reading of the best one's top view,
 /// refined by the estimator the cloud's noise calls for (one estimator for all of a
-/// cloud's candidates, chosen on its likeliest one: candidates are compared by one
-/// measure), scored on [`ROUND2_POINTS`] of the stage-2 sample. A dropped reading keeps
-/// round 1's candidates. With each cloud's estimator: the likelihood (true) or least
-/// squares.
+/// cloud's candidates, so that they are compared by one measure: the likelihood where the
+/// noise is wide against the likeliest candidate's section or any kept ring's), scored on
+/// [`ROUND2_POINTS`] of the stage-2 sample. A cloud whose likeliest refinement blurs it
+/// by more than [`MAX_SIGMA_GROWTH`] times the noise it shows is refined by least squares
+/// instead. A dropped reading keeps round 1's candidates. With each cloud's estimator:
+/// the likelihood (true) or least squares.
 pub(super) fn round2(
     evaluator: &mut dyn Evaluator,
     group: &[(usize, Prepared)],
@@ -183,12 +185,22 @@ pub(super) fn round2(
     let noise: Vec<Option<f64>> = group
         .iter()
         .zip(&direct)
-        .map(|((_, p), direct)| {
+        .enumerate()
+        .map(|(cloud, ((_, p), direct))| {
             let best = direct.as_ref()?;
             // (the cloud's own scatter, or the fit's residuals where those are the smaller:
             // the scatter reads a precise thin ring's curvature as noise)
             let noise = p.scatter().map_or(best.sigma, |s| s.min(best.sigma));
-            noisy(p, &best.candidate, noise).then_some(noise)
+            // (judged on every ring kept too: least squares reads a thin section blurred
+            // by the noise as a thick one, which then looks precise)
+            let rings = first.kept[cloud]
+                .iter()
+                .map(|k| &k.candidate)
+                .filter(|c| c.shape.a4 > 1.0);
+            std::iter::once(&best.candidate)
+                .chain(rings)
+                .any(|c| noisy(p, c, noise))
+                .then_some(noise)
         })
         .collect();
     let mut round2: Vec<Vec<Scored>> = first.kept.clone();
@@ -202,13 +214,28 @@ pub(super) fn round2(
             round2[cloud] = refined;
         }
     }
+    let mut modelled: Vec<bool> = noise.iter().map(Option::is_some).collect();
     for (cloud, (_, p)) in group.iter().enumerate() {
         if let Some(noise) = noise[cloud].filter(|_| !first.dropped[cloud]) {
-            round2[cloud] =
+            let refined =
                 refine_noisy(evaluator, p, cloud, &first.kept[cloud], &mids[cloud], noise)?;
+            // (the likelihood's sigma far above the noise the cloud shows: it takes the
+            // object's own departure from the model for blur, and the cloud is refined as
+            // a precise one)
+            let best = choose(&refined);
+            if best.modelled && best.sigma > MAX_SIGMA_GROWTH * noise {
+                let mut refined = refine_precise(evaluator, group, &first.kept, &[cloud], &mids)?
+                    .pop()
+                    .unwrap_or_default();
+                refined.extend(direct[cloud]);
+                round2[cloud] = refined;
+                modelled[cloud] = false;
+            } else {
+                round2[cloud] = refined;
+            }
         }
     }
-    Ok((round2, noise.iter().map(Option::is_some).collect()))
+    Ok((round2, modelled))
 }
 
 /// Round 2 of the `precise` clouds: least squares on the stage-2 sample, every
