@@ -451,6 +451,14 @@ fn a_batch_of_clouds_fits_on_the_gpu() {
     }
 }
 
+/// One of the paper's clouds, read from `../shared/clouds/paper` (never copied in).
+fn paper_cloud(name: &str) -> Vec<DVec3> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(format!("../shared/clouds/paper/{name}.pcd"));
+    supertoroid::io::read_cloud(&path, None)
+        .expect("the paper's clouds live in ../shared/clouds/paper")
+}
+
 /// The paper's pot: a wall seen from one side, which least squares also fits with a
 /// body stretched over empty space (a cylinder ten times taller than the pot, or one
 /// lying on its side) at a lower cost than the ring the paper fits. Sizes are kept to the
@@ -460,10 +468,7 @@ fn a_batch_of_clouds_fits_on_the_gpu() {
 /// `docs/fit.md`).
 #[test]
 fn the_pot_is_not_stretched_over_empty_space() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/clouds/paper/pot2clean.pcd");
-    let points = supertoroid::io::read_cloud(&path, None)
-        .expect("the paper's clouds live in ../shared/clouds/paper");
+    let points = paper_cloud("pot2clean");
     let mut evaluator = CpuEvaluator::new();
     let fits: Vec<_> = (0..10)
         .map(|seed| {
@@ -505,10 +510,7 @@ fn the_pot_is_not_stretched_over_empty_space() {
 /// pot is refined as a precise cloud: a thick ring close to most of its points.
 #[test]
 fn the_pot_read_as_a_view_is_not_taken_for_a_thin_walled_tube() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/clouds/paper/pot2clean.pcd");
-    let points = supertoroid::io::read_cloud(&path, None)
-        .expect("the paper's clouds live in ../shared/clouds/paper");
+    let points = paper_cloud("pot2clean");
     let mut evaluator = CpuEvaluator::new();
     for seed in [0, 2, 3] {
         let o = FitOptions {
@@ -534,10 +536,7 @@ fn the_pot_read_as_a_view_is_not_taken_for_a_thin_walled_tube() {
 fn the_pots_runs_grade_alike_on_both_backends() {
     let ctx =
         GpuContext::shared(&AdapterChoice::from_env()).expect("a GPU adapter (lavapipe in CI)");
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/clouds/paper/pot2clean.pcd");
-    let points = supertoroid::io::read_cloud(&path, None)
-        .expect("the paper's clouds live in ../shared/clouds/paper");
+    let points = paper_cloud("pot2clean");
     let runs = |evaluator: &mut dyn Evaluator| -> Vec<FitReport> {
         (0..10)
             .map(|seed| {
@@ -722,10 +721,7 @@ fn noise_free_views_with_outliers_are_fitted_to_rounding() {
 fn the_paper_clouds_fit_within_the_bound_on_their_scatter() {
     let mut evaluator = CpuEvaluator::new();
     for name in ["gearclean", "perfectnoisedisplaced", "pot2clean", "roll"] {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join(format!("../shared/clouds/paper/{name}.pcd"));
-        let points = supertoroid::io::read_cloud(&path, None)
-            .expect("the paper's clouds live in ../shared/clouds/paper");
+        let points = paper_cloud(name);
         let scatter = supertoroid::fit::scatter::local_scatter(&points).unwrap();
         let options = FitOptions {
             viewpoint: supertoroid::fit::Viewpoint::None,

@@ -204,16 +204,6 @@ pub(super) fn round2(
         })
         .collect();
     let mut round2: Vec<Vec<Scored>> = first.kept.clone();
-    let precise: Vec<usize> = (0..group.len())
-        .filter(|&c| noise[c].is_none() && !first.dropped[c])
-        .collect();
-    if !precise.is_empty() {
-        let refined = refine_precise(evaluator, group, &first.kept, &precise, &mids)?;
-        for (cloud, mut refined) in precise.into_iter().zip(refined) {
-            refined.extend(direct[cloud]);
-            round2[cloud] = refined;
-        }
-    }
     let mut modelled: Vec<bool> = noise.iter().map(Option::is_some).collect();
     for (cloud, (_, p)) in group.iter().enumerate() {
         if let Some(noise) = noise[cloud].filter(|_| !first.dropped[cloud]) {
@@ -221,18 +211,23 @@ pub(super) fn round2(
                 refine_noisy(evaluator, p, cloud, &first.kept[cloud], &mids[cloud], noise)?;
             // (the likelihood's sigma far above the noise the cloud shows: it takes the
             // object's own departure from the model for blur, and the cloud is refined as
-            // a precise one)
+            // a precise one below)
             let best = choose(&refined);
             if best.modelled && best.sigma > MAX_SIGMA_GROWTH * noise {
-                let mut refined = refine_precise(evaluator, group, &first.kept, &[cloud], &mids)?
-                    .pop()
-                    .unwrap_or_default();
-                refined.extend(direct[cloud]);
-                round2[cloud] = refined;
                 modelled[cloud] = false;
             } else {
                 round2[cloud] = refined;
             }
+        }
+    }
+    let precise: Vec<usize> = (0..group.len())
+        .filter(|&c| !modelled[c] && !first.dropped[c])
+        .collect();
+    if !precise.is_empty() {
+        let refined = refine_precise(evaluator, group, &first.kept, &precise, &mids)?;
+        for (cloud, mut refined) in precise.into_iter().zip(refined) {
+            refined.extend(direct[cloud]);
+            round2[cloud] = refined;
         }
     }
     Ok((round2, modelled))
