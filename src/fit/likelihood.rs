@@ -277,7 +277,7 @@ impl Problem<'_> {
     fn surface(&self, x: &Vector, with_derivatives: bool) -> Surface {
         let shape = Self::shape(x);
         let (rings, sectors) = self.grid;
-        let curves = Curves::new(&shape, (0.0, std::f64::consts::TAU), rings, sectors);
+        let curves = Curves::closed(&shape, rings, sectors);
         let Cells {
             centres: canonical,
             areas,

@@ -49,6 +49,12 @@ impl Curves {
         }
     }
 
+    /// The curves of a grid closed both ways (a shape with a hole, a4 > 1): its rings
+    /// divide the whole turn of the section.
+    pub fn closed(shape: &[f64; 6], rings: usize, sectors: usize) -> Self {
+        Self::new(shape, (0.0, TAU), rings, sectors)
+    }
+
     /// The grid's sectors (its top view's steps).
     pub fn sectors(&self) -> usize {
         self.top.len() - 1
@@ -104,7 +110,7 @@ pub(super) fn surface_cells(
     rings: usize,
     sectors: usize,
 ) -> (Vec<DVec3>, Vec<f64>, Vec<DVec3>) {
-    let cells = Curves::new(shape, (0.0, TAU), rings, sectors).cells(shape);
+    let cells = Curves::closed(shape, rings, sectors).cells(shape);
     (cells.centres, cells.areas, cells.normals)
 }
 
