@@ -1747,6 +1747,44 @@ fn auto_tells_rings_from_boxes_and_cans_on_single_views() {
     ));
 }
 
+/// `model: auto` weighs the two fits of a cloud by their likelihood, so both are refined by
+/// it where either is: a superellipsoid fit that least squares left short of its
+/// likelihood's maximum lost to a supertoroid the likelihood refined. Cases of the fresh
+/// model-choice set 670000 that the superellipsoid fit refined by least squares lost (two
+/// boxes' views taken for rings, and a full ring's cloud taken for a blob).
+#[test]
+fn both_models_of_a_cloud_are_weighed_at_their_likelihoods_maximum() {
+    use supertoroid::bench::synthetic::{Presentation, category, presented};
+    use supertoroid::fit::Model;
+    use supertoroid::suite::ground_truth::{Kind, make_case_of};
+    let mut evaluator = CpuEvaluator::new();
+    for seed in [670_063u64, 670_165, 670_010] {
+        let i = (seed % 1000) as usize;
+        let kind = if i % 2 == 0 {
+            Kind::Holed
+        } else {
+            Kind::Superellipsoid
+        };
+        let (partial, noise, outliers) = category(i / 2);
+        let case = make_case_of(kind, seed, partial, noise, outliers);
+        let (points, viewpoint, _) = presented(&case, Presentation::Camera);
+        let options = FitOptions {
+            seed,
+            viewpoint,
+            model: Model::Auto,
+            ..Default::default()
+        };
+        let r = fit(&mut evaluator, &points, &options).unwrap();
+        let want = match kind {
+            Kind::Holed => Model::Supertoroid,
+            Kind::Superellipsoid => Model::Superellipsoid,
+        };
+        assert_eq!(r.model.kind, want, "{seed}: {:?}", r.model.bic);
+        let estimator = &r.search.as_ref().expect("a searched fit").estimator;
+        assert_eq!(estimator, "likelihood", "{seed}");
+    }
+}
+
 /// The broadened suite's CI subset (`suite::broad`): twelve views, three of each family
 /// (the suite's ranges, tall rolls, thin washers, oval rings) through the D435-like
 /// sensor, half with outliers over the scene's box, fitted with no options in the

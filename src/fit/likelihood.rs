@@ -66,9 +66,9 @@ use visibility::View;
 pub const CUTOFF: f64 = 4.0;
 /// Two steps in a row that raise the mean log-likelihood by less than this end the
 /// refinement (a thousand points: 0.02 in all, far below what tells two fits apart
-/// statistically). One such step alone stopped
-/// 20175 in a flat valley 13% off in a3: two in a row gave 518 -> 519 of 540 (nothing
-/// lost), the fit times the same within the machine's noise.
+/// statistically). One such step alone can stop a fit in a flat valley (13% off in a3
+/// seen on the suite); two in a row gave 519 against 518 of 540 (nothing lost), the fit
+/// times the same within the machine's noise.
 pub const STOP_DECREASE: f64 = 2e-5;
 /// Levenberg-Marquardt iterations at most, by default.
 pub const MAX_ITERATIONS: usize = 30;
@@ -95,7 +95,7 @@ fn bounding_box(points: &[DVec3]) -> (DVec3, DVec3) {
 /// and the fit. Seen through the world's box, the model took half or less of the outliers
 /// near the surface for outliers (at the true parameters, 10% outliers read as 4-7%), and
 /// counted the rest as surface points blurring a thicker section: sizes 10-16% too large
-/// on noisy single views (40160, 40161, 50053, 60179).
+/// on noisy single views.
 pub fn outlier_volume(points: &[DVec3], sigma: f64) -> f64 {
     let (axes, _) = super::principal_axes(points);
     let along: Vec<DVec3> = points.iter().map(|p| axes.transpose() * *p).collect();

@@ -97,8 +97,8 @@ pub const MAX_SIGMA_GROWTH: f64 = 2.0;
 /// points by a flat sheet and takes the rest for outliers. (On the thirteen seed sets of
 /// the suite, 2340 cases, every noisy case's thinnest half-axis is at least 1.03 sigmas.
 /// With the outliers spread over the cloud's own box (`likelihood::outlier_volume`), and
-/// so denser, a refinement of 140086 settled on a sheet 0.03 sigmas thick, sizes 98%
-/// off.)
+/// so denser, a refinement on the suite could settle on a sheet 0.03 sigmas thick, sizes
+/// 98% off.)
 pub const MIN_SECTION_SIGMAS: f64 = 0.5;
 
 /// Whether a noise-model fit has collapsed ([`MIN_SECTION_SIGMAS`]).

@@ -12,7 +12,9 @@
 //! six of shape, six of pose; 11 for the superellipsoid, whose a4 is fixed). The lower
 //! BIC is chosen; the report gives both and their margin. A superellipsoid is the
 //! supertoroid at a4 = 0, so the penalty decides only where the data cannot tell them
-//! apart.
+//! apart. The BIC wants each model at its likelihood's maximum: the search refines the
+//! superellipsoid fit by the likelihood wherever it refines the cloud's free fit so
+//! (`search::batch`'s model twins).
 
 use super::search::Sample;
 use super::{FitReport, inferred_view::normalised_stride};

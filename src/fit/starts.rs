@@ -211,8 +211,9 @@ pub fn across_line_of_sight(axis: DVec3, viewpoint: Option<DVec3>) -> Option<DVe
 }
 
 /// A normal lines' axis within this angle of the line of sight gets no second axis across
-/// it ([`across_line_of_sight`]). The held-out view 60171 (noise-free, seen 75 degrees
-/// off its hole axis) had its normal lines' axis 44 degrees from the line of sight.
+/// it ([`across_line_of_sight`]): a view seen far off its hole axis (75 degrees, say)
+/// can have its normal lines' axis as near as 44 degrees to the line of sight, and still
+/// needs the axis across it.
 pub const ALONG_SIGHT_DEGREES: f64 = 25.0;
 
 /// The other reading of a top view: a superellipse with exponent eps2 turned 45 degrees
@@ -310,9 +311,9 @@ mod tests {
 /// a1·a4: a single view's centroid lies on the skin the sensor saw, and seen from the
 /// side a ring's centre is that far behind it. None for a view into the hole (the axis
 /// within [`ALONG_SIGHT_DEGREES`] of the line of sight), whose centroid is on
-/// the axis already. On the suite, 60175, a thin ring seen 10 degrees off edge-on, was
-/// fitted as a closed body 8 times its size that its points covered 14% of; the
-/// collapsed starts on the skin found nothing covered, one of these finds the truth.
+/// the axis already. Without them a thin ring seen nearly edge-on can be fitted as a
+/// closed body many times its size that its points cover a small part of: every start
+/// on the skin collapses there, and one moved behind it finds the ring.
 pub fn behind_the_skin(start: &Candidate, viewpoint: DVec3) -> Option<Candidate> {
     let axis = start.pose.axis();
     let away = (start.pose.translation - viewpoint).try_normalize()?;

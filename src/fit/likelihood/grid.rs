@@ -130,7 +130,7 @@ pub const CELL_SIGMAS: f64 = 2.0;
 /// The rings of [`refine_finely`] are at most this many sigmas apart along the section
 /// (half of [`CELL_SIGMAS`]). On a section only a few sigmas thick, rings
 /// [`CELL_SIGMAS`] apart bias the model's optimum: refined from the true parameters on
-/// 16,000 points of full clouds at 2% noise (40008, 50098, 100044, three samples each),
+/// 16,000 points of three full clouds at 2% noise (three samples each),
 /// eps1 came out +0.01 to +0.11 high (mean +0.04) and a3 up to 3% long; with rings one
 /// sigma apart, -0.06 to +0.07 (mean 0.00) and a3 within 2%. Finer sectors changed
 /// nothing.

@@ -94,8 +94,8 @@ impl View {
 /// `the_visible_cells_are_those_no_surface_hides`, 0.1-0.4% now), a different strip on
 /// each grid: the objective jumped by 0.02-0.07 per point when sigma moved the grid by one
 /// ring (0.01 now), and the refinement stalled or cycled between grids. With the mesh the
-/// truth of the suite's single views is far more likely (by 0.1 per point on 20158 and
-/// 30161) and the model from the truth recovers 532 of 540 cases instead of 528
+/// truth of the suite's single views is far more likely (by up to 0.1 per point) and
+/// the model from the truth recovers 532 of 540 cases instead of 528
 /// (`examples/model_ceiling.rs`, all points; 527 instead of 520 on the fit's sample). It
 /// costs about 1.3 ms per evaluation at 19,000 cells (0.5 ms before; two threads).
 pub(crate) fn visibility(

@@ -179,16 +179,26 @@ fn searched_once(
             Err(e) => results[i] = Some(Err(e)),
         }
     }
+    // (the free fits first: a superellipsoid fit takes the estimator its cloud's free
+    // fit took, see [`model_twins`])
+    groups.sort_by_key(|g| g[0].1.known[3].is_some());
+    let model_twins = model_twins(clouds);
+    let mut by_likelihood = vec![false; clouds.len()];
     for group in groups {
         let local = |i: usize| group.iter().position(|(j, _)| *j == i);
         let local_twins: Vec<(usize, usize)> = twins
             .iter()
             .filter_map(|&(a, b)| Some((local(a)?, local(b)?)))
             .collect();
+        let as_twin: Vec<bool> = group
+            .iter()
+            .map(|(i, _)| model_twins[*i].is_some_and(|free| by_likelihood[free]))
+            .collect();
         // (the preparation and the groups searched before count as stage 1)
         let searched_at = start.elapsed().as_secs_f64() * 1e3;
-        let found = search_group(evaluator, &group, &local_twins)?;
+        let found = search_group(evaluator, &group, &local_twins, &as_twin)?;
         for ((i, p), f) in group.iter().zip(found) {
+            by_likelihood[*i] = f.tried.estimator == "likelihood";
             dropped[*i] = f.stopped_after;
             let best = &f.best;
             let mut r = report(
@@ -226,4 +236,28 @@ fn searched_once(
             .collect(),
         dropped,
     ))
+}
+
+/// For each cloud fitted as a superellipsoid (`model` superellipsoid), the same cloud's
+/// free fit in this batch (the same points, read from the same viewpoint), if any.
+/// `model: auto` fits a cloud both ways and weighs the two fits by their likelihood; a
+/// fit least squares refined is not at its likelihood's maximum, so the superellipsoid
+/// fit is refined by the likelihood wherever the free one was (the free fit's kept
+/// rings can call for it where the superellipsoid's own candidates do not).
+fn model_twins(clouds: &[(&[DVec3], &FitOptions)]) -> Vec<Option<usize>> {
+    let same_cloud = |a: &(&[DVec3], &FitOptions), b: &(&[DVec3], &FitOptions)| {
+        std::ptr::eq(a.0, b.0) && a.1.viewpoint == b.1.viewpoint
+    };
+    clouds
+        .iter()
+        .map(|c| {
+            (c.1.model == Model::Superellipsoid)
+                .then(|| {
+                    clouds
+                        .iter()
+                        .position(|o| o.1.model == Model::Supertoroid && same_cloud(c, o))
+                })
+                .flatten()
+        })
+        .collect()
 }

@@ -75,9 +75,9 @@ const ROBUST_ROUNDS: usize = 4;
 const ROBUST_SHRINK: f64 = 0.5;
 /// Iterations of a round after the first (15 in the first). Only clouds that lie on
 /// their surface get there, and at a small scale the last steps of a slow valley still
-/// count: at 15 the held-out noise-free view 40138 stopped with its points 4e-5 of the
-/// size off and a4 14% long, at 60 it is within tolerance (the six seed sets' 360
-/// noise-free cases 352 -> 353, their median fit time the same; no noisy case changed).
+/// count: at 15 a noise-free view can stop with its points 4e-5 of the size off and a4
+/// 14% long (on six seed sets' 360 noise-free cases, 60 against 15: 353 against 352
+/// right, the median fit time the same, no noisy case changed).
 const ROBUST_LATER_ITERATIONS: usize = 60;
 
 /// A cloud's sample as the likelihood sees it.
@@ -291,10 +291,12 @@ pub(super) struct Found {
 
 /// The search for every cloud of a group (clouds with one solver setting): round 1,
 /// the twin cut after it, round 2, the twin cut after it, the finalists.
+/// `by_likelihood`: the clouds round 2 refines by the likelihood whatever their noise.
 pub(super) fn search_group(
     evaluator: &mut dyn Evaluator,
     group: &[(usize, Prepared)],
     twins: &[(usize, usize)],
+    by_likelihood: &[bool],
 ) -> Result<Vec<Found>, FitError> {
     let t0 = Instant::now();
     let mut first = rounds::round1(evaluator, group, twins)?;
@@ -306,7 +308,7 @@ pub(super) fn search_group(
     );
     let t1 = t0.elapsed();
 
-    let (round2, noisy_clouds) = rounds::round2(evaluator, group, &first)?;
+    let (round2, noisy_clouds) = rounds::round2(evaluator, group, &first, by_likelihood)?;
     let t2 = t0.elapsed();
 
     // Twins (one cloud read as a view and as a view from nowhere): the reading whose best

@@ -141,12 +141,14 @@ fn sample_of(p: &Prepared, points: &[DVec3], all_round: bool) -> Sample {
 /// noise is wide against the likeliest candidate's section or any kept ring's), scored on
 /// [`ROUND2_POINTS`] of the stage-2 sample. A cloud whose likeliest refinement blurs it
 /// by more than [`MAX_SIGMA_GROWTH`] times the noise it shows is refined by least squares
-/// instead. A dropped reading keeps round 1's candidates. With each cloud's estimator:
-/// the likelihood (true) or least squares.
+/// instead. A cloud of `by_likelihood` goes the likelihood way whatever its noise. A
+/// dropped reading keeps round 1's candidates. With each cloud's estimator: the
+/// likelihood (true) or least squares.
 pub(super) fn round2(
     evaluator: &mut dyn Evaluator,
     group: &[(usize, Prepared)],
     first: &Round1,
+    by_likelihood: &[bool],
 ) -> Result<(Vec<Vec<Scored>>, Vec<bool>), FitError> {
     let sets2: Vec<PointSet> = group.iter().map(|(_, p)| p.stage2_set()).collect();
     evaluator.set_point_sets_with_free_space(&sets2)?;
@@ -197,10 +199,11 @@ pub(super) fn round2(
                 .iter()
                 .map(|k| &k.candidate)
                 .filter(|c| c.shape.a4 > 1.0);
-            std::iter::once(&best.candidate)
-                .chain(rings)
-                .any(|c| noisy(p, c, noise))
-                .then_some(noise)
+            (by_likelihood[cloud] && p.noise_model
+                || std::iter::once(&best.candidate)
+                    .chain(rings)
+                    .any(|c| noisy(p, c, noise)))
+            .then_some(noise)
         })
         .collect();
     let mut round2: Vec<Vec<Scored>> = first.kept.clone();
