@@ -1785,6 +1785,38 @@ fn both_models_of_a_cloud_are_weighed_at_their_likelihoods_maximum() {
     }
 }
 
+/// A box whose free fit (an apple, its dimple under the noise) beats its superellipsoid fit
+/// by less than positive evidence (`model_choice::MIN_EVIDENCE`) stays a superellipsoid:
+/// the two such cases of the model-choice sets 610000-680000, each a hair over a BIC of 0.
+#[test]
+fn a_free_fit_a_hair_likelier_does_not_make_a_box_an_apple() {
+    use supertoroid::bench::synthetic::{Presentation, category, presented};
+    use supertoroid::fit::Model;
+    use supertoroid::fit::model_choice::MIN_EVIDENCE;
+    use supertoroid::suite::ground_truth::{Kind, make_case_of};
+    let mut evaluator = CpuEvaluator::new();
+    for seed in [620_141u64, 680_083] {
+        let (partial, noise, outliers) = category((seed % 1000) as usize / 2);
+        let case = make_case_of(Kind::Superellipsoid, seed, partial, noise, outliers);
+        let (points, viewpoint, _) = presented(&case, Presentation::Camera);
+        let options = FitOptions {
+            seed,
+            viewpoint,
+            model: Model::Auto,
+            ..Default::default()
+        };
+        let r = fit(&mut evaluator, &points, &options).unwrap();
+        let bic = r.model.bic.expect("auto reports both scores");
+        let supertoroid = bic.supertoroid.expect("the free fit kept a dimple");
+        // the free fit is the likelier, by less than the evidence asked for
+        assert!(
+            supertoroid < bic.superellipsoid && supertoroid + MIN_EVIDENCE > bic.superellipsoid,
+            "{seed}: {bic:?}"
+        );
+        assert_eq!(r.model.kind, Model::Superellipsoid, "{seed}: {bic:?}");
+    }
+}
+
 /// The broadened suite's CI subset (`suite::broad`): twelve views, three of each family
 /// (the suite's ranges, tall rolls, thin washers, oval rings) through the D435-like
 /// sensor, half with outliers over the scene's box, fitted with no options in the

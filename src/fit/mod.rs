@@ -594,7 +594,8 @@ fn report(
     quality.visible_coverage = p
         .viewpoint
         .map(|v| coverage::visible_coverage(candidate, &p.stage2_pts, v));
-    quality.standard_errors = uncertainty::standard_errors(&shape, &pose, p.points);
+    quality.standard_errors =
+        uncertainty::standard_errors(&shape, &pose, p.points, &p.known.map(|k| k.is_some()));
     let warnings = quality
         .standard_errors
         .as_ref()

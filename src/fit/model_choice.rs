@@ -10,7 +10,8 @@
 //! where NLL is the negative mean log-likelihood per point at the noise sigma that
 //! minimises it, n the points scored and k the free parameters (12 for the supertoroid:
 //! six of shape, six of pose; 11 for the superellipsoid, whose a4 is fixed). The lower
-//! BIC is chosen; the report gives both and their margin. A superellipsoid is the
+//! BIC is chosen, the supertoroid only by at least [`MIN_EVIDENCE`]; the report gives
+//! both and their margin. A superellipsoid is the
 //! supertoroid at a4 = 0, so the penalty decides only where the data cannot tell them
 //! apart. The BIC wants each model at its likelihood's maximum: the search refines the
 //! superellipsoid fit by the likelihood wherever it refines the cloud's free fit so
@@ -33,6 +34,12 @@ const SIGMA_RANGE: f64 = 4.0;
 pub const MIN_SIGMA: f64 = 1e-3;
 /// Golden-section steps of that search (the bracket shrinks to 0.6% of its width).
 const SIGMA_STEPS: usize = 12;
+/// The supertoroid is chosen only where its BIC is lower by at least this much: positive
+/// evidence on Kass and Raftery's scale of 2 ln(Bayes factor), which the BIC difference
+/// approximates (under 2, "not worth more than a bare mention"). Below it the simpler
+/// model stands: a free fit a hair better is mostly an apple whose dimple is under the
+/// noise.
+pub const MIN_EVIDENCE: f64 = 2.0;
 
 /// A free fit whose a4 comes out below this is a superellipsoid (the solver stops a
 /// margin inside its bounds, not on them), and is reported with a4 = 0.
@@ -58,7 +65,7 @@ pub fn is_superellipsoid(shape: &crate::model::Shape) -> bool {
 )]
 #[serde(rename_all = "lowercase")]
 pub enum Model {
-    /// both fitted, the lower BIC chosen
+    /// both fitted, the lower BIC chosen (the supertoroid's by at least [`MIN_EVIDENCE`])
     #[default]
     Auto,
     /// one hole or none: a4 free
@@ -154,7 +161,7 @@ pub fn choose(points: &[glam::DVec3], holed: FitReport, genus0: FitReport) -> Fi
             (genus0, genus0_bic)
         };
         (None, value, best, Model::Superellipsoid)
-    } else if genus0_bic <= holed_bic {
+    } else if genus0_bic < holed_bic + MIN_EVIDENCE {
         (Some(holed_bic), genus0_bic, genus0, Model::Superellipsoid)
     } else {
         (Some(holed_bic), genus0_bic, holed, Model::Supertoroid)
