@@ -207,7 +207,7 @@ pub fn assemble(
 
 /// The height of a fitted surface's lowest point over the plane (negative below it),
 /// from a grid of its surface points.
-pub fn lowest_height(shape: &Shape, pose: &Pose, plane: &Plane) -> f64 {
+fn lowest_height(shape: &Shape, pose: &Pose, plane: &Plane) -> f64 {
     crate::grasp::surface::grid(shape, pose, 24, 48)
         .iter()
         .map(|q| plane.signed_distance(DVec3::from(q.point)))

@@ -198,7 +198,7 @@ fn searched_once(
         let searched_at = start.elapsed().as_secs_f64() * 1e3;
         let found = search_group(evaluator, &group, &local_twins, &as_twin)?;
         for ((i, p), f) in group.iter().zip(found) {
-            by_likelihood[*i] = f.tried.estimator == "likelihood";
+            by_likelihood[*i] = f.by_likelihood;
             dropped[*i] = f.stopped_after;
             let best = &f.best;
             let mut r = report(

@@ -286,6 +286,8 @@ pub(super) struct Found {
     pub finalists_ms: f64,
     /// its twin's reading was plainly more likely: the round it went no further than
     pub stopped_after: Option<&'static str>,
+    /// round 2 refined it by the likelihood (else by least squares)
+    pub by_likelihood: bool,
     pub tried: SearchOut,
 }
 
@@ -333,6 +335,7 @@ pub(super) fn search_group(
             stage1_iterations: first.stage1_iterations[cloud],
             round1_ms: ms(t1),
             finalists_ms: ms(t3 - t2),
+            by_likelihood: noisy_clouds[cloud],
             stopped_after: if first.dropped[cloud] {
                 Some("round 1")
             } else {
