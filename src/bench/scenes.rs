@@ -37,6 +37,8 @@ pub struct SceneObjectCase {
     pub model_right: bool,
     pub success: bool,
     pub chamfer: f64,
+    /// its fit carries a warning
+    pub warned: bool,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -130,6 +132,7 @@ pub fn run(
                 camera.to_canonical(pose.translation),
             );
             let holed = shape.a4 > 0.0;
+            let warned = fit.is_some_and(|r| !r.warnings.is_empty());
             let (model_right, within, chamfer) = match fit {
                 None => (false, false, f64::NAN),
                 Some(r) => {
@@ -153,6 +156,7 @@ pub fn run(
                 model_right,
                 success: model_right && within,
                 chamfer,
+                warned,
             });
         }
         out_frames.push(SceneFrame {
@@ -196,11 +200,12 @@ impl Report for ScenesReport {
     }
 
     fn csv(&self) -> String {
-        let mut s =
-            String::from("frame,holed,visible_pixels,in_view,found,model_right,success,chamfer\n");
+        let mut s = String::from(
+            "frame,holed,visible_pixels,in_view,found,model_right,success,chamfer,warned\n",
+        );
         for o in &self.objects {
             s += &format!(
-                "{},{},{},{},{},{},{},{:.5}\n",
+                "{},{},{},{},{},{},{},{:.5},{}\n",
                 o.frame,
                 o.holed,
                 o.visible_pixels,
@@ -208,7 +213,8 @@ impl Report for ScenesReport {
                 o.found,
                 o.model_right,
                 o.success,
-                o.chamfer
+                o.chamfer,
+                o.warned
             );
         }
         s
@@ -248,6 +254,15 @@ impl Report for ScenesReport {
                 kept.iter().filter(|o| o.success).count()
             );
         }
+        let fitted: Vec<_> = seen.iter().filter(|o| o.found).collect();
+        let warned_of = |right: bool| {
+            let kept: Vec<_> = fitted.iter().filter(|o| o.success == right).collect();
+            (kept.iter().filter(|o| o.warned).count(), kept.len())
+        };
+        let ((wrong_warned, wrong), (right_warned, right)) = (warned_of(false), warned_of(true));
+        md += &format!(
+            "\n\nWarnings: {wrong_warned} of the {wrong} wrong fits carry one, {right_warned} of the {right} right ones."
+        );
         if !self.frames.is_empty() {
             let times = || self.frames.iter().map(|f| f.total_ms).collect::<Vec<_>>();
             let segment: Vec<f64> = self.frames.iter().map(|f| f.segment_ms).collect();
