@@ -254,14 +254,17 @@ impl Report for ScenesReport {
                 kept.iter().filter(|o| o.success).count()
             );
         }
-        let fitted: Vec<_> = seen.iter().filter(|o| o.found).collect();
-        let warned_of = |right: bool| {
-            let kept: Vec<_> = fitted.iter().filter(|o| o.success == right).collect();
-            (kept.iter().filter(|o| o.warned).count(), kept.len())
+        // (of the objects found: right ones, and the wrong ones)
+        let warned = |success: bool| {
+            seen.iter()
+                .filter(|o| o.found && o.success == success && o.warned)
+                .count()
         };
-        let ((wrong_warned, wrong), (right_warned, right)) = (warned_of(false), warned_of(true));
         md += &format!(
-            "\n\nWarnings: {wrong_warned} of the {wrong} wrong fits carry one, {right_warned} of the {right} right ones."
+            "\n\nWarnings: {} of the {} wrong fits carry one, {} of the {right} right ones.",
+            warned(false),
+            found - right,
+            warned(true)
         );
         if !self.frames.is_empty() {
             let times = || self.frames.iter().map(|f| f.total_ms).collect::<Vec<_>>();
