@@ -69,7 +69,7 @@ fn main() {
             } else {
                 None
             };
-            let sensor = v.map(|v| objective::Sensor::new(&sample, v));
+            let sensor = v.map(|v| objective::Sensor::new(&sample, supertoroid::fit::Sight::at(v)));
             let data = objective::Data {
                 points: &sample,
                 outlier_weight: LIKELIHOOD_OUTLIER_WEIGHT,
@@ -98,7 +98,8 @@ fn main() {
                 objective::value(&data, &fitted, fs)
             );
             for vv in [v, None] {
-                let sensor2 = vv.map(|v| objective::Sensor::new(&sample, v));
+                let sensor2 =
+                    vv.map(|v| objective::Sensor::new(&sample, supertoroid::fit::Sight::at(v)));
                 let d2 = objective::Data {
                     sensor: sensor2.as_ref(),
                     ..data
@@ -107,7 +108,13 @@ fn main() {
                     "  at truth, sensor {}: new {:.4} old {:?}",
                     vv.is_some(),
                     objective::value(&d2, &truth, sigma),
-                    likelihood::objective(&sample, &truth, sigma, LIKELIHOOD_OUTLIER_WEIGHT, vv)
+                    likelihood::objective(
+                        &sample,
+                        &truth,
+                        sigma,
+                        LIKELIHOOD_OUTLIER_WEIGHT,
+                        vv.map(supertoroid::fit::Sight::at)
+                    )
                 );
             }
             let ol = likelihood::Limits {
@@ -132,7 +139,7 @@ fn main() {
                     &start,
                     s0,
                     LIKELIHOOD_OUTLIER_WEIGHT,
-                    v,
+                    v.map(supertoroid::fit::Sight::at),
                     &ol,
                     60,
                 ) {

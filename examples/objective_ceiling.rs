@@ -51,13 +51,14 @@ fn main() {
             &truth,
             sigma,
             LIKELIHOOD_OUTLIER_WEIGHT,
-            viewpoint,
+            viewpoint.map(supertoroid::fit::Sight::at),
             &limits,
             60,
         );
         t_old.push(t.elapsed().as_secs_f64() * 1e3);
         let t = Instant::now();
-        let sensor = viewpoint.map(|v| objective::Sensor::new(&sample, v));
+        let sensor =
+            viewpoint.map(|v| objective::Sensor::new(&sample, supertoroid::fit::Sight::at(v)));
         let volume = likelihood::outlier_volume(&sample, sigma);
         let data = objective::Data {
             points: &sample,

@@ -973,6 +973,7 @@ fn a_thin_ring_with_few_noisy_points_is_flagged_uncertain() {
 /// into the side the sensor did not see shows it surface without points.
 #[test]
 fn the_visible_surface_of_the_true_shape_is_covered_and_a_grown_ones_is_not() {
+    use supertoroid::fit::Sight;
     use supertoroid::fit::coverage::{MIN_VISIBLE_COVERAGE, visible_coverage};
     // the suite's case 10010: single view, noise 1%
     let case = make_case(10_010, true, 0.01, 0.0);
@@ -980,7 +981,7 @@ fn the_visible_surface_of_the_true_shape_is_covered_and_a_grown_ones_is_not() {
     let points = norm.points(&case.points);
     let viewpoint = norm.point(case.viewpoint.unwrap());
     let truth = norm.candidate(&case.shape, &case.pose);
-    let covered = visible_coverage(&truth, &points, viewpoint);
+    let covered = visible_coverage(&truth, &points, Sight::at(viewpoint));
     // grown: twice as thick and wide, moved away from the sensor so that its front
     // stays about where the points are
     let mut grown = truth;
@@ -989,7 +990,7 @@ fn the_visible_surface_of_the_true_shape_is_covered_and_a_grown_ones_is_not() {
     grown.shape.a3 *= 2.0;
     let away = (truth.pose.translation - viewpoint).normalize();
     grown.pose.translation += away * truth.shape.a3;
-    let uncovered = visible_coverage(&grown, &points, viewpoint);
+    let uncovered = visible_coverage(&grown, &points, Sight::at(viewpoint));
     eprintln!("coverage: truth {covered:.2}, grown {uncovered:.2}");
     assert!(covered >= 0.9, "truth covered {covered}");
     assert!(
@@ -1666,7 +1667,7 @@ fn the_objective_keeps_the_rims_of_a_pinched_section_seen_by_a_sensor() {
     let viewpoint = norm.point(case.viewpoint.expect("a view"));
     let truth = norm.candidate(&case.shape, &case.pose);
     let sigma = case.noise * case.shape.size() / norm.scale;
-    let sensor = objective::Sensor::new(&points, viewpoint);
+    let sensor = objective::Sensor::new(&points, supertoroid::fit::Sight::at(viewpoint));
     let data = objective::Data {
         points: &points,
         outlier_weight: LIKELIHOOD_OUTLIER_WEIGHT,
@@ -1679,7 +1680,7 @@ fn the_objective_keeps_the_rims_of_a_pinched_section_seen_by_a_sensor() {
         &truth,
         sigma,
         LIKELIHOOD_OUTLIER_WEIGHT,
-        Some(viewpoint),
+        Some(supertoroid::fit::Sight::at(viewpoint)),
     )
     .expect("a ring");
     assert!(

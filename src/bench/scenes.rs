@@ -10,18 +10,22 @@ use super::{Report, percentile};
 use crate::eval::{Backend, make_evaluator};
 use crate::fit::{FitOptions, Model};
 use crate::io::depth::{DepthOptions, PinholeIntrinsics, back_project_pixels};
-use crate::model::Pose;
+use crate::model::{Pose, Shape};
 use crate::scene::fit::fit_scene;
 use crate::scene::objects::SceneOptions;
 use crate::suite::chamfer::{CHAMFER_BOUND, relative_chamfer};
 use crate::suite::ground_truth::compare;
 use crate::synth::scene::{FIRST_OBJECT, random_table_scene, render_scene, with_sensor_noise};
+use crate::synth::{Camera, render_view};
 use serde::Serialize;
 
 /// The sensor model of the suite: 1 mm of depth noise at 0.5 m (growing with the range
 /// squared), 1 mm quantisation, flying pixels at a third of the silhouette edges.
 pub const NOISE_AT_HALF_METRE: f64 = 0.001;
 pub const FLYING_SHARE: f64 = 0.3;
+/// An object with at least this share of its silhouette in the frame counts as wholly
+/// in it; the rest the frame's edge cuts, and what lies past the edge no camera saw.
+pub const WHOLLY_IN_FRAME: f64 = 0.9;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct SceneObjectCase {
@@ -33,6 +37,9 @@ pub struct SceneObjectCase {
     /// the rest (out of the frame, or hidden behind others) cannot be found and are left
     /// out of the rates
     pub in_view: bool,
+    /// the share of its whole silhouette (as a camera without the frame's edges would
+    /// see it alone) that lies in the frame: under [`WHOLLY_IN_FRAME`] the edge cuts it
+    pub in_frame: f64,
     pub found: bool,
     pub model_right: bool,
     pub success: bool,
@@ -132,6 +139,7 @@ pub fn run(
                 camera.to_canonical(pose.translation),
             );
             let holed = shape.a4 > 0.0;
+            let in_frame = silhouette_in_frame(shape, pose, &scene.camera)?;
             let warned = fit.is_some_and(|r| !r.warnings.is_empty());
             let (model_right, within, chamfer) = match fit {
                 None => (false, false, f64::NAN),
@@ -152,6 +160,7 @@ pub fn run(
                 holed,
                 visible_pixels: visible,
                 in_view: visible >= SceneOptions::default().min_points,
+                in_frame,
                 found: mine.is_some(),
                 model_right,
                 success: model_right && within,
@@ -178,6 +187,23 @@ pub fn run(
     })
 }
 
+/// The share of an object's silhouette, seen alone, that lies in the camera's frame
+/// (against a camera whose frame is wider by [`FRAME_PAD`] pixels on every side).
+fn silhouette_in_frame(shape: &Shape, pose: &Pose, camera: &Camera) -> Result<f64, String> {
+    let mut wider = *camera;
+    wider.intrinsics.width += 2 * FRAME_PAD;
+    wider.intrinsics.height += 2 * FRAME_PAD;
+    wider.intrinsics.cx += FRAME_PAD as f64;
+    wider.intrinsics.cy += FRAME_PAD as f64;
+    let whole = render_view(shape, pose, &wider, 0.001)?.pixels.len();
+    let framed = render_view(shape, pose, camera, 0.001)?.pixels.len();
+    Ok(framed as f64 / whole.max(1) as f64)
+}
+
+/// How far past the frame [`silhouette_in_frame`] looks: the scenes' objects are at most
+/// about 300 pixels across.
+const FRAME_PAD: u32 = 400;
+
 /// The object most of the pixels show, if an object is what most of them show.
 fn majority_object(pixels: &[(u32, u32)], labels: &[u16], width: u32) -> Option<usize> {
     let mut counts = std::collections::HashMap::new();
@@ -201,15 +227,16 @@ impl Report for ScenesReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "frame,holed,visible_pixels,in_view,found,model_right,success,chamfer,warned\n",
+            "frame,holed,visible_pixels,in_view,in_frame,found,model_right,success,chamfer,warned\n",
         );
         for o in &self.objects {
             s += &format!(
-                "{},{},{},{},{},{},{},{:.5},{}\n",
+                "{},{},{},{},{:.3},{},{},{},{:.5},{}\n",
                 o.frame,
                 o.holed,
                 o.visible_pixels,
                 o.in_view,
+                o.in_frame,
                 o.found,
                 o.model_right,
                 o.success,
@@ -252,6 +279,21 @@ impl Report for ScenesReport {
                 kept.iter().filter(|o| o.found).count(),
                 kept.len(),
                 kept.iter().filter(|o| o.success).count()
+            );
+        }
+        for (label, whole) in [
+            ("wholly in the frame", true),
+            ("cut by the frame's edge", false),
+        ] {
+            let kept: Vec<_> = seen
+                .iter()
+                .filter(|o| (o.in_frame >= WHOLLY_IN_FRAME) == whole)
+                .collect();
+            let right = kept.iter().filter(|o| o.success).count();
+            md += &format!(
+                "\nObjects {label}: {right} of {} right ({:.1}%).",
+                kept.len(),
+                share(right, kept.len())
             );
         }
         // (of the objects found: right ones, and the wrong ones)

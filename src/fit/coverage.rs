@@ -12,6 +12,7 @@
 //! when a point in its 3 x 3 neighbourhood lies within [`DEPTH_TOLERANCE`] of the fitted
 //! depth. Everything is in the normalised frame (the cloud's RMS radius is 1).
 
+use super::Sight;
 use crate::eval::Candidate;
 use crate::synth;
 use glam::{DVec2, DVec3};
@@ -39,9 +40,11 @@ pub const DEPTH_TOLERANCE: f64 = 0.08;
 /// 195 above; the true shapes fell below it in 1 case of 270 (median 0.97).
 pub const MIN_VISIBLE_COVERAGE: f64 = 0.75;
 
-/// The fraction of the fitted surface's visible pixels (seen from `viewpoint`) that the
-/// points cover; 1 when no fitted pixel is visible (nothing to contradict).
-pub fn visible_coverage(candidate: &Candidate, points: &[DVec3], viewpoint: DVec3) -> f64 {
+/// The fraction of the fitted surface's visible pixels (seen from `sight`, within its
+/// frame's edges where known) that the points cover; 1 when no fitted pixel is visible
+/// (nothing to contradict).
+pub fn visible_coverage(candidate: &Candidate, points: &[DVec3], sight: Sight) -> f64 {
+    let viewpoint = sight.viewpoint;
     if points.is_empty() {
         return 1.0;
     }
@@ -63,7 +66,11 @@ pub fn visible_coverage(candidate: &Candidate, points: &[DVec3], viewpoint: DVec
         AREA_TABLE,
         &mut rng,
     );
-    let fitted: Vec<(DVec2, f64)> = surface.iter().filter_map(|p| project(*p)).collect();
+    let fitted: Vec<(DVec2, f64)> = surface
+        .iter()
+        .filter(|p| sight.frames(**p))
+        .filter_map(|p| project(*p))
+        .collect();
     let measured: Vec<(DVec2, f64)> = points.iter().filter_map(|p| project(*p)).collect();
     // the image spans the fit and the points together
     let (lo, hi) = fitted.iter().chain(&measured).fold(

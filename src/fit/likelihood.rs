@@ -48,6 +48,7 @@ use grid::{grid_for, regrid, surface_cells};
 
 pub(crate) use derivatives::{d_log_view_weight, d_log_view_weight_pose};
 
+use super::sight::Sight;
 use crate::eval::Candidate;
 use crate::model::{Pose, Shape};
 use crate::solve::Bounds;
@@ -112,8 +113,9 @@ struct Problem<'a> {
     outlier_density: f64,
     rotation0: DQuat,
     grid: (usize, usize),
-    /// the sensor's position: the points then cover only what it saw (see [`View`])
-    viewpoint: Option<DVec3>,
+    /// the sensor's position (and frame): the points then cover only what it saw (see
+    /// [`View`])
+    sight: Option<Sight>,
     /// data points meet the cells within this many sigmas ([`CUTOFF`] for the fit)
     cutoff: f64,
     /// the rings' spacing along the section, in sigmas ([`grid_for`])
@@ -226,7 +228,7 @@ impl<'a> Problem<'a> {
         candidate: &Candidate,
         sigma: f64,
         outlier_weight: f64,
-        viewpoint: Option<DVec3>,
+        sight: Option<Sight>,
         cutoff: f64,
         section_cell_sigmas: f64,
     ) -> Option<(Self, Vector)> {
@@ -241,7 +243,7 @@ impl<'a> Problem<'a> {
             outlier_density: outlier_weight / volume,
             rotation0: candidate.pose.rotation,
             grid: grid_for(&s.to_array(), sigma, section_cell_sigmas),
-            viewpoint,
+            sight,
             cutoff,
             section_cell_sigmas,
         };
@@ -291,12 +293,12 @@ impl Problem<'_> {
             .collect();
         // seen from a viewpoint, a cell's share is its area times its view weight (the
         // visibility found once here)
-        let world_normals: Vec<DVec3> = match self.viewpoint {
+        let world_normals: Vec<DVec3> = match self.sight {
             Some(_) => normals.par_iter().map(|n| rotation * *n).collect(),
             None => Vec::new(),
         };
         let view = self
-            .viewpoint
+            .sight
             .map(|v| View::new(&cells, &areas, &world_normals, self.grid, v));
         let areas = match &view {
             Some(view) => view.weights(&areas, &cells, &normals, rotation),
@@ -344,7 +346,7 @@ impl Problem<'_> {
         }
         let mut d_log_weights_pose = Vec::new();
         let mut d_log_area_pose = [0.0; 6];
-        if let (true, Some(v)) = (with_derivatives, self.viewpoint) {
+        if let (true, Some(Sight { viewpoint: v, .. })) = (with_derivatives, self.sight) {
             d_log_weights_pose = kept
                 .par_iter()
                 .map(|&j| d_log_view_weight_pose(world_normals[j], cells[j], translation, v))
@@ -516,7 +518,7 @@ pub fn refine(
     start: &Candidate,
     sigma: f64,
     outlier_weight: f64,
-    viewpoint: Option<DVec3>,
+    sight: Option<Sight>,
     limits: &Limits,
     max_iterations: usize,
 ) -> Option<Refined> {
@@ -525,7 +527,7 @@ pub fn refine(
         start,
         sigma,
         outlier_weight,
-        viewpoint,
+        sight,
         CUTOFF,
         CELL_SIGMAS,
     )?;
@@ -534,7 +536,7 @@ pub fn refine(
 
 /// The signature of [`refine`] and [`refine_finely`].
 pub type Refine =
-    fn(&[DVec3], &Candidate, f64, f64, Option<DVec3>, &Limits, usize) -> Option<Refined>;
+    fn(&[DVec3], &Candidate, f64, f64, Option<Sight>, &Limits, usize) -> Option<Refined>;
 
 /// [`refine`] on a grid twice as fine along the section
 /// ([`FINE_SECTION_CELL_SIGMAS`]): an optimum without the coarse grid's bias, at about
@@ -544,7 +546,7 @@ pub fn refine_finely(
     start: &Candidate,
     sigma: f64,
     outlier_weight: f64,
-    viewpoint: Option<DVec3>,
+    sight: Option<Sight>,
     limits: &Limits,
     max_iterations: usize,
 ) -> Option<Refined> {
@@ -553,7 +555,7 @@ pub fn refine_finely(
         start,
         sigma,
         outlier_weight,
-        viewpoint,
+        sight,
         CUTOFF,
         FINE_SECTION_CELL_SIGMAS,
     )?;
@@ -667,14 +669,14 @@ pub fn scores(
     candidate: &Candidate,
     sigma: f64,
     outlier_weight: f64,
-    viewpoint: Option<DVec3>,
+    sight: Option<Sight>,
 ) -> Option<Scores> {
     let (problem, x) = Problem::at(
         points,
         candidate,
         sigma,
         outlier_weight,
-        viewpoint,
+        sight,
         SCORE_CUTOFF,
         CELL_SIGMAS,
     )?;
@@ -694,14 +696,14 @@ pub fn objective(
     candidate: &Candidate,
     sigma: f64,
     outlier_weight: f64,
-    viewpoint: Option<DVec3>,
+    sight: Option<Sight>,
 ) -> Option<f64> {
     let (problem, x) = Problem::at(
         points,
         candidate,
         sigma,
         outlier_weight,
-        viewpoint,
+        sight,
         CUTOFF,
         CELL_SIGMAS,
     )?;
@@ -805,8 +807,14 @@ mod tests {
         let (canonical, areas, normals) = surface_cells(&shape.to_array(), rings, sectors);
         let cells: Vec<DVec3> = canonical.iter().map(|c| pose.to_world(*c)).collect();
         let world_normals: Vec<DVec3> = normals.iter().map(|n| pose.rotation * *n).collect();
-        let weights = View::new(&cells, &areas, &world_normals, (rings, sectors), viewpoint)
-            .weights(&areas, &cells, &normals, pose.rotation);
+        let weights = View::new(
+            &cells,
+            &areas,
+            &world_normals,
+            (rings, sectors),
+            Sight::at(viewpoint),
+        )
+        .weights(&areas, &cells, &normals, pose.rotation);
         let cos_bin = |j: usize| {
             let cos = world_normals[j]
                 .dot((cells[j] - viewpoint).normalize())
@@ -866,7 +874,13 @@ mod tests {
             let (canonical, areas, normals) = surface_cells(&shape.to_array(), rings, sectors);
             let cells: Vec<DVec3> = canonical.iter().map(|c| pose.to_world(*c)).collect();
             let world_normals: Vec<DVec3> = normals.iter().map(|n| pose.rotation * *n).collect();
-            let view = View::new(&cells, &areas, &world_normals, (rings, sectors), viewpoint);
+            let view = View::new(
+                &cells,
+                &areas,
+                &world_normals,
+                (rings, sectors),
+                Sight::at(viewpoint),
+            );
             let spacing = (areas.iter().sum::<f64>() / areas.len() as f64).sqrt();
             let (mut seen, mut occluded, mut wrong) = (0.0, 0.0, 0.0);
             for j in 0..cells.len() {
@@ -940,7 +954,7 @@ mod tests {
             outlier_density: 0.05 / 8.0,
             rotation0: pose.rotation,
             grid: grid_for(&shape.to_array(), 0.03, CELL_SIGMAS),
-            viewpoint,
+            sight: viewpoint.map(Sight::at),
             cutoff: CUTOFF,
             section_cell_sigmas: CELL_SIGMAS,
         };

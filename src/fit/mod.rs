@@ -33,6 +33,7 @@ mod prepare;
 mod report;
 pub mod scatter;
 mod search;
+mod sight;
 pub mod starts;
 pub mod uncertainty;
 pub mod viewpoint;
@@ -52,6 +53,7 @@ pub use report::{
 pub use search::polish::{
     MISFIT_OVER_SCATTER, OFF_ITS_POINTS_WARNING, POLISH_POINTS, PRECISE_MISFIT,
 };
+pub use sight::{FieldOfView, Sight};
 pub use viewpoint::{Viewpoint, ViewpointSource, ViewpointUsed};
 
 use crate::eval::{Candidate, EvalError, Evaluator, Loss, Normalization, PointSet};
@@ -273,7 +275,12 @@ pub fn fit_batch(
                 let holed = fits.next().expect("one fit per model");
                 let genus0 = fits.next().expect("one fit per model");
                 match (holed, genus0) {
-                    (Ok(h), Ok(g)) => Ok(with_input(model_choice::choose(points, h, g))),
+                    (Ok(h), Ok(g)) => Ok(with_input(model_choice::choose(
+                        points,
+                        options[0].field_of_view,
+                        h,
+                        g,
+                    ))),
                     (Ok(one), Err(_)) | (Err(_), Ok(one)) => Ok(with_input(one)),
                     (Err(e), Err(_)) => Err(e),
                 }
@@ -592,8 +599,8 @@ fn report(
         quality.noise_sigma = sigma * p.norm.scale;
     }
     quality.visible_coverage = p
-        .viewpoint
-        .map(|v| coverage::visible_coverage(candidate, &p.stage2_pts, v));
+        .sight()
+        .map(|s| coverage::visible_coverage(candidate, &p.stage2_pts, s));
     quality.standard_errors =
         uncertainty::standard_errors(&shape, &pose, p.points, &p.known.map(|k| k.is_some()));
     let warnings = quality

@@ -18,7 +18,7 @@
 //! (`search::batch`'s model twins).
 
 use super::search::Sample;
-use super::{FitReport, inferred_view::normalised_stride};
+use super::{FieldOfView, FitReport, Sight, inferred_view::normalised_stride};
 use serde::Serialize;
 
 /// The most points of a cloud scored (an even stride through it).
@@ -114,8 +114,14 @@ impl ModelOut {
 }
 
 /// The better of a cloud's two fits by BIC, its report's `model` saying so; its time is
-/// the batch's that made both, and the choice's.
-pub fn choose(points: &[glam::DVec3], holed: FitReport, genus0: FitReport) -> FitReport {
+/// the batch's that made both, and the choice's. Seen from a viewpoint, the cloud is
+/// scored as what it saw within `field` (its frame's edges), where given.
+pub fn choose(
+    points: &[glam::DVec3],
+    field: Option<FieldOfView>,
+    holed: FitReport,
+    genus0: FitReport,
+) -> FitReport {
     let start = std::time::Instant::now();
     let (norm, sample) = normalised_stride(points, CHOICE_POINTS);
     let n = sample.len() as f64;
@@ -132,7 +138,10 @@ pub fn choose(points: &[glam::DVec3], holed: FitReport, genus0: FitReport) -> Fi
         .viewpoint
         .position
         .or(genus0.viewpoint.position)
-        .map(|p| norm.point(p.into()));
+        .map(|p| Sight {
+            viewpoint: norm.point(p.into()),
+            field,
+        });
     let scored = Sample::new(&sample, viewpoint, false);
     let bic = |r: &FitReport| {
         let candidate = norm.candidate(&r.fitted.0, &r.fitted.1);

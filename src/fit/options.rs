@@ -115,10 +115,20 @@ pub struct FitOptions {
     /// in the camera's own frame). The space between it and every point is empty, so a
     /// candidate that puts solid there pays for it (see [`free_space`]).
     pub viewpoint: Viewpoint,
+    /// the edges of the viewpoint's frame (a camera's image, or the region of it the
+    /// points were read from), in the cloud's frame: the sensor saw nothing past them, so
+    /// an object they cut is not expected to show points there ([`super::sight`])
+    pub field_of_view: Option<FieldOfView>,
     /// prior: the surface the object rests on (a table, in world units, its normal
     /// towards the object): the object does not reach below it (see
     /// [`free_space::below_support`])
     pub support: Option<crate::model::Plane>,
+    /// prior: the table the object stands on (world units, its normal towards the
+    /// object). A resting object has an axis along the table's normal and reaches down to
+    /// the table, so the search also starts from the table's normal and the two axes of
+    /// the object's footprint on it, each box reaching from the table to the object's top
+    /// ([`starts::resting_starts`])
+    pub resting_on: Option<crate::model::Plane>,
     /// points the sensor saw past, in the cloud's frame: free space the object does not
     /// fill (a scene gives the rays to the table seen through and beside each object)
     pub seen_through: Vec<DVec3>,
@@ -156,7 +166,9 @@ impl Default for FitOptions {
             known_axis: None,
             known_shape: [None; 6],
             viewpoint: Viewpoint::Auto,
+            field_of_view: None,
             support: None,
+            resting_on: None,
             seen_through: Vec::new(),
             noise_model: true,
             polish_points: POLISH_POINTS,

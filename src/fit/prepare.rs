@@ -69,6 +69,8 @@ pub(super) struct Prepared<'a> {
     pub(super) refine_scale: Option<f64>,
     /// the viewpoint in the normalised frame, if given
     pub(super) viewpoint: Option<DVec3>,
+    /// the edges of the viewpoint's frame, if given (normalising leaves them as they are)
+    pub(super) field: Option<FieldOfView>,
     /// the known shape parameters (normalised sizes), held fixed
     pub(super) known: [Option<f64>; 6],
     /// run [`likelihood::refine`] on noisy fits
@@ -107,6 +109,17 @@ pub(super) fn prepare<'a>(
         let (mut on_lines, across) =
             normal_line_starts(&axis_sample, axes, o, viewpoint, start_set);
         on_lines.extend(principal_axis_starts(&stage1_pts, axes, o.known_axis));
+        if let Some(table) = &o.resting_on
+            && o.known_axis.is_none()
+        {
+            let (normal, offset) = normalised_plane(table, &norm);
+            on_lines.extend(starts::resting_starts(
+                &stage1_pts,
+                normal,
+                offset,
+                known[3],
+            ));
+        }
         (on_lines, across)
     };
     for start in starts.iter_mut().chain(&mut across) {
@@ -159,6 +172,7 @@ pub(super) fn prepare<'a>(
         max_overreach: (!paper).then_some(MAX_OVERREACH),
         refine_scale: (!paper && o.refine_scale > 0.0).then_some(o.refine_scale),
         viewpoint,
+        field: o.field_of_view,
         known,
         noise_model: !paper && o.noise_model,
         known_axis: o.known_axis.is_some(),
@@ -194,10 +208,18 @@ fn check_options(o: &FitOptions) -> Result<(), FitError> {
     if o.viewpoint.position().is_some_and(|v| !v.is_finite()) {
         return invalid("the viewpoint must be finite".into());
     }
+    if o.field_of_view.is_some_and(|f| !f.is_finite()) {
+        return invalid("the field of view must be finite".into());
+    }
     if let Some(plane) = &o.support
         && !(plane.normal().is_finite() && plane.offset.is_finite())
     {
         return invalid("the support plane must be finite".into());
+    }
+    if let Some(plane) = &o.resting_on
+        && !(plane.normal().is_finite() && plane.offset.is_finite())
+    {
+        return invalid("the table's plane must be finite".into());
     }
     if !o.seen_through.iter().all(|p| p.is_finite()) {
         return invalid("the points seen through must be finite".into());
@@ -218,13 +240,20 @@ fn free_space_of(
 ) -> Vec<DVec3> {
     let mut free = viewpoint.map_or_else(Vec::new, |v| free_space::in_front(sample, v));
     if let Some(plane) = &o.support {
-        // the plane in the normalised frame: n·(s x + c) + d = 0
-        let normal = plane.normal();
-        let offset = (plane.offset + normal.dot(norm.centre)) / norm.scale;
+        let (normal, offset) = normalised_plane(plane, norm);
         free.extend(free_space::below_support(sample, normal, offset));
     }
     free.extend(o.seen_through.iter().map(|&p| norm.point(p)));
     free
+}
+
+/// A plane's unit normal and offset in the normalised frame: n·(s x + c) + d = 0.
+fn normalised_plane(plane: &crate::model::Plane, norm: &Normalization) -> (DVec3, f64) {
+    let normal = plane.normal();
+    (
+        normal,
+        (plane.offset + normal.dot(norm.centre)) / norm.scale,
+    )
 }
 
 /// The known shape parameters (sizes normalised), each checked to be plausible.
@@ -492,6 +521,15 @@ impl Prepared<'_> {
         let mut dual = starts::turned_dual(fitted);
         dual.shape = self.supported_bounds(fitted).interior(&dual.shape);
         Some(dual)
+    }
+
+    /// What the noise model takes the sensor to have seen from: the viewpoint and its
+    /// frame's edges.
+    pub(super) fn sight(&self) -> Option<Sight> {
+        self.viewpoint.map(|viewpoint| Sight {
+            viewpoint,
+            field: self.field,
+        })
     }
 
     pub(super) fn overreaches(&self, candidate: &Candidate, sample: &[DVec3]) -> bool {

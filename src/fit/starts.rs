@@ -304,6 +304,43 @@ mod tests {
         );
         assert_eq!(across_line_of_sight(DVec3::X, None), None);
     }
+
+    /// Only the top and the front of a box standing on a table are seen: the standing
+    /// start still reaches from the table to the top, about the box's axis, and the
+    /// lying ones have their axes in the table's plane.
+    #[test]
+    fn a_standing_start_reaches_down_to_the_table() {
+        // the table z = 0.1 (n = z, d = -0.1); a box 0.6 x 0.4 x 0.5 tall on it
+        let (normal, offset) = (DVec3::Z, -0.1);
+        let mut seen = Vec::new();
+        for i in 0..=20 {
+            for j in 0..=20 {
+                let (u, v) = (i as f64 / 20.0, j as f64 / 20.0);
+                // the top face, and the front face (y = -0.2) down to the table
+                seen.push(DVec3::new(-0.3 + 0.6 * u, -0.2 + 0.4 * v, 0.6));
+                seen.push(DVec3::new(-0.3 + 0.6 * u, -0.2, 0.1 + 0.5 * v));
+            }
+        }
+        let starts = resting_starts(&seen, normal, offset, None);
+        assert_eq!(starts.len(), 6);
+        let standing = &starts[0];
+        let axis = standing.pose.rotation * DVec3::Z;
+        assert!(axis.dot(normal) > 0.999, "{axis}");
+        let bottom = standing.pose.translation.z - standing.shape.a3;
+        assert!((bottom - 0.1).abs() < 1e-9, "bottom {bottom}");
+        assert!((standing.shape.a3 - 0.25).abs() < 1e-9);
+        // the footprint's long side (x) is the first axis across
+        let long = standing.pose.rotation * DVec3::X;
+        assert!(long.dot(DVec3::X).abs() > 0.999, "{long}");
+        for lying in &starts[2..] {
+            let axis = lying.pose.rotation * DVec3::Z;
+            assert!(axis.dot(normal).abs() < 1e-9, "{axis}");
+        }
+        // with a4 known, one start per axis at it
+        let held = resting_starts(&seen, normal, offset, Some(0.0));
+        assert_eq!(held.len(), 3);
+        assert!(held.iter().all(|s| s.shape.a4 == 0.0));
+    }
 }
 
 /// `start` (centred on the cloud's centroid, the origin of the normalised frame) moved
@@ -324,4 +361,59 @@ pub fn behind_the_skin(start: &Candidate, viewpoint: DVec3) -> Option<Candidate>
     let mut moved = *start;
     moved.pose.translation += across * (start.shape.a1 * start.shape.a4);
     Some(moved)
+}
+
+/// Starts for an object standing on a table (`normal`, `offset`: the plane n·x + d = 0 in
+/// the points' frame, n towards the object): its axis along the table's normal (standing)
+/// or along either axis of its footprint (lying), each with the box the points and their
+/// shadows on the table span, so that it reaches down to the table; at hole ratios 1.5
+/// and 3, or at the known a4.
+pub fn resting_starts(
+    points: &[DVec3],
+    normal: DVec3,
+    offset: f64,
+    known_a4: Option<f64>,
+) -> Vec<Candidate> {
+    if points.is_empty() {
+        return Vec::new();
+    }
+    let shadows: Vec<DVec3> = points
+        .iter()
+        .map(|p| *p - normal * (normal.dot(*p) + offset))
+        .collect();
+    // the footprint's longest axis: the shadows' largest spread
+    let (vectors, _) = crate::fit::principal_axes(&shadows);
+    let along = (vectors.x_axis - normal * vectors.x_axis.dot(normal))
+        .try_normalize()
+        .unwrap_or_else(|| normal.any_orthonormal_vector());
+    let across = normal.cross(along);
+    let spanned: Vec<DVec3> = points.iter().chain(&shadows).copied().collect();
+    let a4s: Vec<f64> = known_a4.map_or_else(|| vec![1.5, 3.0], |a4| vec![a4]);
+    let mut starts = Vec::new();
+    for (axis, hint) in [(normal, along), (along, normal), (across, normal)] {
+        let rotation = frame_with_z(axis, hint);
+        let inverse = rotation.inverse();
+        let local: Vec<DVec3> = spanned.iter().map(|p| inverse * *p).collect();
+        let (lo, hi) = local
+            .iter()
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), q| {
+                (lo.min(*q), hi.max(*q))
+            });
+        let half = ((hi - lo) / 2.0).max(DVec3::splat(1e-3));
+        let middle = rotation * ((lo + hi) / 2.0);
+        for &a4 in &a4s {
+            starts.push(Candidate {
+                shape: Shape::new(
+                    half.x / (1.0 + a4),
+                    half.y / (1.0 + a4),
+                    half.z,
+                    a4,
+                    1.0,
+                    1.0,
+                ),
+                pose: Pose::new(rotation, middle),
+            });
+        }
+    }
+    starts
 }

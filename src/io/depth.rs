@@ -375,5 +375,16 @@ pub fn back_project_pixels(
     if points.is_empty() {
         return Err(CloudError::NoValidDepth);
     }
-    Ok(crate::scene::table::Pixels { points, pixels })
+    Ok(crate::scene::table::Pixels {
+        points,
+        pixels,
+        window: [x0, y0, roi.width, roi.height],
+        field_of_view: crate::fit::FieldOfView::of_pixels(
+            k.fx,
+            k.fy,
+            k.cx,
+            k.cy,
+            [x0, y0, roi.width, roi.height],
+        ),
+    })
 }

@@ -77,6 +77,17 @@ impl Segment {
         }
         [u0, v0, u1 - u0 + 1, v1 - v0 + 1]
     }
+
+    /// How many of its pixels lie on the edge of `window` ([x, y, width, height]): an
+    /// object the frame's edge cuts shows a run of them, one wholly in the frame none.
+    pub fn edge_pixels(&self, window: [u32; 4]) -> usize {
+        let [x, y, w, h] = window;
+        let (right, bottom) = ((x + w).saturating_sub(1), (y + h).saturating_sub(1));
+        self.pixels
+            .iter()
+            .filter(|&&(u, v)| u <= x || v <= y || u >= right || v >= bottom)
+            .count()
+    }
 }
 
 /// A frame split into its table and the objects on it.
@@ -89,6 +100,10 @@ pub struct Segmentation {
     pub objects: Vec<Segment>,
     /// clusters dropped as too small or too large
     pub dropped: usize,
+    /// the pixel rectangle the frame's points came from ([`Pixels::window`])
+    pub window: [u32; 4],
+    /// its edges seen from the camera
+    pub field_of_view: crate::fit::FieldOfView,
 }
 
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -175,6 +190,8 @@ pub fn segment(
         table_points: table.len(),
         objects,
         dropped,
+        window: frame.window,
+        field_of_view: frame.field_of_view,
     })
 }
 

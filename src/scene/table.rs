@@ -26,6 +26,11 @@ pub struct Pixels {
     pub points: Vec<DVec3>,
     /// (column, row) of each point
     pub pixels: Vec<(u32, u32)>,
+    /// the pixel rectangle [x, y, width, height] they were read from: the whole image,
+    /// or the region of interest asked for (what lies outside it the fit never saw)
+    pub window: [u32; 4],
+    /// the edges of that rectangle seen from the camera ([`crate::fit::FieldOfView`])
+    pub field_of_view: crate::fit::FieldOfView,
 }
 
 /// What [`remove_table`] did.

@@ -574,11 +574,18 @@ async fn fit_depth(
             format!("max_size must be positive and finite, not {max_size}"),
         ));
     }
-    let (points, notes, table) = depth_points(&state, &params, depth_bytes, mask_bytes)?;
+    let DepthPoints {
+        points,
+        notes,
+        table,
+        field_of_view,
+    } = depth_points(&state, &params, depth_bytes, mask_bytes)?;
     let mut job = params.options.job(points)?;
-    // a depth frame's points are in the camera's optical frame: the sensor is the origin
+    // a depth frame's points are in the camera's optical frame: the sensor is the origin,
+    // and it saw nothing past the edges of the image (or the box) they were read from
     if job.options.viewpoint == Viewpoint::Auto {
         job.options.viewpoint = Viewpoint::At(DVec3::ZERO, ViewpointSource::Camera);
+        job.options.field_of_view = Some(field_of_view);
     }
     let mut fit = fit_one(&state, job).await?;
     if fit.shape.size() > max_size {
@@ -772,14 +779,24 @@ impl Frame {
     }
 }
 
-/// The frame's selected pixels back-projected, and notes for the report (an ROI clipped
-/// to the image).
+/// A depth frame's object points, as [`depth_points`] reads them.
+struct DepthPoints {
+    points: Vec<DVec3>,
+    /// for the report (an ROI clipped to the image)
+    notes: Vec<String>,
+    /// the table taken out of a box
+    table: Option<crate::model::Plane>,
+    /// the edges of the pixels read
+    field_of_view: crate::fit::FieldOfView,
+}
+
+/// The frame's selected pixels back-projected ([`DepthPoints`]).
 fn depth_points(
     state: &AppState,
     params: &DepthFitRequest,
     depth: DepthBytes,
     mask: Option<Vec<u8>>,
-) -> Result<(Vec<DVec3>, Vec<String>, Option<crate::model::Plane>), ApiError> {
+) -> Result<DepthPoints, ApiError> {
     let frame = Frame {
         intrinsics: params.intrinsics,
         depth_scale: params.depth_scale,
@@ -788,6 +805,7 @@ fn depth_points(
         depth_range: params.depth_range,
     };
     let (selected, image, has_mask) = frame.back_project(state, depth, mask)?;
+    let field_of_view = selected.field_of_view;
     let intrinsics = params.intrinsics.expect("checked by back_project");
     let mut notes: Vec<String> = Vec::new();
     let mut table = None;
@@ -841,7 +859,12 @@ fn depth_points(
                 )
             }),
     );
-    Ok((points, notes, table))
+    Ok(DepthPoints {
+        points,
+        notes,
+        table,
+        field_of_view,
+    })
 }
 
 /// Fit many clouds in one request; each gets its own result or error.

@@ -141,6 +141,7 @@ pub async fn scene(
                 &segmentation.plane,
                 scene_options.table_prior,
                 &object.seen_through,
+                segmentation.field_of_view,
             );
             Ok(job)
         })

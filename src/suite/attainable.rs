@@ -17,6 +17,7 @@
 //! miss; one whose ceiling is near 0 is beyond what its points say.
 
 use crate::eval::{Candidate, Normalization};
+use crate::fit::Sight;
 use crate::fit::likelihood::{self, PARAMETERS};
 use crate::model::{Pose, Shape};
 use crate::suite::ground_truth::{Case, compare};
@@ -52,7 +53,7 @@ pub fn efficient_success(
         &truth,
         sigma / norm.scale,
         OUTLIER_ALLOWANCE,
-        viewpoint.map(|v| norm.point(v)),
+        viewpoint.map(|v| Sight::at(norm.point(v))),
     )?;
     let information = per_point.information * points.len() as f64;
     // the covariance through the eigenvectors: directions the points do not inform at

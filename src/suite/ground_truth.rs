@@ -5,7 +5,7 @@
 //! superellipsoids beside them, judged by their surfaces ([`super::chamfer`]).
 
 use crate::eval::Normalization;
-use crate::fit::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, likelihood};
+use crate::fit::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, Sight, likelihood};
 use crate::model::{Pose, Shape};
 use crate::synth::{self, Camera, Intrinsics};
 use glam::{DQuat, DVec3};
@@ -260,7 +260,7 @@ pub fn model_from_truth(
         &truth,
         sigma,
         LIKELIHOOD_OUTLIER_WEIGHT,
-        case.viewpoint.map(|v| norm.point(v)),
+        case.viewpoint.map(|v| Sight::at(norm.point(v))),
         &limits,
         2 * likelihood::MAX_ITERATIONS,
     )?;

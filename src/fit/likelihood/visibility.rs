@@ -1,6 +1,7 @@
 //! What a depth sensor sees of the noise model's surface grid: which cells no other part
 //! of the surface hides, and the sensor's density of points over the cells it sees.
 
+use crate::fit::sight::Sight;
 use glam::{DQuat, DVec3};
 use rayon::prelude::*;
 
@@ -19,10 +20,11 @@ impl View {
         areas: &[f64],
         normals: &[DVec3],
         grid: (usize, usize),
-        viewpoint: DVec3,
+        sight: Sight,
     ) -> Self {
         let centre = cells.iter().copied().sum::<DVec3>() / cells.len().max(1) as f64;
-        let visible = visibility(cells, areas, normals, grid, centre, viewpoint, true);
+        let visible = visibility(cells, areas, normals, grid, centre, sight, true);
+        let viewpoint = sight.viewpoint;
         Self {
             viewpoint,
             visible,
@@ -39,10 +41,10 @@ impl View {
         areas: &[f64],
         normals: &[DVec3],
         grid: (usize, usize),
-        viewpoint: DVec3,
+        sight: Sight,
     ) -> Vec<bool> {
         let centre = cells.iter().copied().sum::<DVec3>() / cells.len().max(1) as f64;
-        visibility(cells, areas, normals, grid, centre, viewpoint, false)
+        visibility(cells, areas, normals, grid, centre, sight, false)
     }
 
     /// A depth sensor's points per unit area of a surface it sees: cos(incidence) /
@@ -88,6 +90,7 @@ impl View {
 /// centre facing the sensor is seen where it is no deeper than the mesh in its pixel
 /// (plus the depth its own surface spans across a pixel at its incidence). The occluding
 /// edges then follow the surface to a fraction of a cell whatever the grid.
+/// Nor does it see a cell outside its frame's edges, where they are known ([`Sight`]).
 ///
 /// Why the mesh: the depth buffer it replaced held whole cells, two to a pixel, and hid
 /// strips of seen cells along every occluding edge (6% of the seen weight in
@@ -104,9 +107,10 @@ pub(crate) fn visibility(
     normals: &[DVec3],
     (rings, sectors): (usize, usize),
     centre: DVec3,
-    viewpoint: DVec3,
+    sight: Sight,
     facing_only: bool,
 ) -> Vec<bool> {
+    let viewpoint = sight.viewpoint;
     let m = cells.len();
     let forward = (centre - viewpoint).normalize_or(DVec3::Z);
     let right = forward.any_orthonormal_vector();
@@ -197,6 +201,10 @@ pub(crate) fn visibility(
         .map(|j| {
             let Some(p) = projected[j] else { return false };
             if facing_only && !facing[j] {
+                return false;
+            }
+            // past the frame's edges the sensor saw nothing
+            if !sight.frames(cells[j]) {
                 return false;
             }
             let (x, y, depth) = screen(p);

@@ -34,6 +34,7 @@ pub mod tables;
 pub use refine::{Limits, Refined, STOP_DECREASE, refine, refine_on, value, value_on};
 
 use crate::eval::Candidate;
+use crate::fit::sight::{FieldOfView, Sight};
 use crate::model::{Pose, Shape};
 use glam::{DQuat, DVec3};
 use normaliser::Normaliser;
@@ -54,6 +55,8 @@ const CHUNK: usize = 64;
 #[derive(Clone, Debug)]
 pub struct Sensor {
     pub viewpoint: DVec3,
+    /// the edges of its frame, where known: past them it saw nothing
+    pub field: Option<FieldOfView>,
     /// per point: reference / range²
     pub point_weights: Vec<f64>,
     /// the squared range the weights are relative to (a common factor: it cancels)
@@ -61,8 +64,9 @@ pub struct Sensor {
 }
 
 impl Sensor {
-    /// The sensor at `viewpoint` (normalised frame) for `points`.
-    pub fn new(points: &[DVec3], viewpoint: DVec3) -> Self {
+    /// The sensor at `sight` (normalised frame) for `points`.
+    pub fn new(points: &[DVec3], sight: Sight) -> Self {
+        let viewpoint = sight.viewpoint;
         let centre = points.iter().copied().sum::<DVec3>() / points.len().max(1) as f64;
         let reference = (centre - viewpoint).length_squared().max(1e-12);
         let point_weights = points
@@ -71,8 +75,19 @@ impl Sensor {
             .collect();
         Self {
             viewpoint,
+            field: sight.field,
             point_weights,
             reference,
+        }
+    }
+}
+
+impl Sensor {
+    /// Where it stood and its frame's edges.
+    pub fn sight(&self) -> Sight {
+        Sight {
+            viewpoint: self.viewpoint,
+            field: self.field,
         }
     }
 }
@@ -151,7 +166,7 @@ impl<'a> Objective<'a> {
                 &Self::shape(x),
                 self.rotation(x),
                 DVec3::new(x[6], x[7], x[8]),
-                Some((sensor.viewpoint, sensor.reference)),
+                Some((sensor.sight(), sensor.reference)),
                 self.area_grid,
                 None,
                 false,
@@ -187,7 +202,7 @@ impl<'a> Objective<'a> {
             &shape,
             rotation,
             translation,
-            sensor.map(|s| (s.viewpoint, s.reference)),
+            sensor.map(|s| (s.sight(), s.reference)),
             self.area_grid,
             self.visible.as_deref(),
             with_gradient,

@@ -13,6 +13,7 @@ use super::tables::section_range;
 use crate::fit::likelihood::{
     Cells, Curves, d_log_view_weight, d_log_view_weight_pose, visibility::View,
 };
+use crate::fit::sight::Sight;
 use crate::model::Shape;
 use glam::{DQuat, DVec3};
 use rayon::prelude::*;
@@ -61,7 +62,7 @@ pub fn normaliser(
     shape: &Shape,
     rotation: DQuat,
     translation: DVec3,
-    sensor: Option<(DVec3, f64)>,
+    sensor: Option<(Sight, f64)>,
     grid: (usize, usize),
     held: Option<&[bool]>,
     with_gradient: bool,
@@ -75,14 +76,14 @@ pub fn normaliser(
         .map(|c| rotation * *c + translation)
         .collect();
     let world_normals: Vec<DVec3> = cells.normals.iter().map(|n| rotation * *n).collect();
-    let visible = sensor.map(|(viewpoint, _)| match held {
+    let visible = sensor.map(|(sight, _)| match held {
         Some(held) if held.len() == cells.areas.len() => held.to_vec(),
-        _ => View::unoccluded(&world_cells, &cells.areas, &world_normals, grid, viewpoint),
+        _ => View::unoccluded(&world_cells, &cells.areas, &world_normals, grid, sight),
     });
     // each cell's weight: its area, or seen by the sensor its density of points,
     // cos(incidence) / range² relative to the reference (zero where it does not see)
     let weight = |j: usize, area: f64, cell: DVec3, normal: DVec3| -> f64 {
-        let Some((viewpoint, reference)) = sensor else {
+        let Some((Sight { viewpoint, .. }, reference)) = sensor else {
             return area;
         };
         if !visible.as_ref().is_some_and(|v| v[j]) {
@@ -155,7 +156,7 @@ fn log_area_derivatives(
     curves: &Curves,
     cells: &Cells,
     world: &World,
-    sensor: Option<(DVec3, f64)>,
+    sensor: Option<(Sight, f64)>,
     weights: &[f64],
     area: f64,
 ) -> [f64; 12] {
@@ -168,7 +169,7 @@ fn log_area_derivatives(
         .map(|j| {
             let d = curves.cell(&shape, j / sectors, j % sectors, cells.normals[j]);
             let mut d_log = [0.0; 12];
-            let Some((viewpoint, _)) = sensor else {
+            let Some((Sight { viewpoint, .. }, _)) = sensor else {
                 d_log[..6].copy_from_slice(&d.log_area);
                 return (weights[j], d_log);
             };

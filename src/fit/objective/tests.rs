@@ -29,7 +29,7 @@ fn density_integral(shape: Shape, viewpoint: Option<DVec3>) -> f64 {
             &shape,
             DQuat::IDENTITY,
             DVec3::ZERO,
-            Some((v, reference)),
+            Some((crate::fit::sight::Sight::at(v), reference)),
             normaliser::FINE,
             None,
             false,
@@ -48,6 +48,7 @@ fn density_integral(shape: Shape, viewpoint: Option<DVec3>) -> f64 {
         let one = [p];
         let sensor = viewpoint.map(|v| Sensor {
             viewpoint: v,
+            field: None,
             point_weights: vec![reference / (p - v).length_squared()],
             reference,
         });
@@ -108,7 +109,7 @@ fn gradient_matches_differences(shape: Shape, sensor: bool) {
     );
     let points = cloud(shape, pose, 300, 0.03, 7);
     let viewpoint = DVec3::new(0.9, -1.4, 1.1);
-    let sensor_model = Sensor::new(&points, viewpoint);
+    let sensor_model = Sensor::new(&points, crate::fit::sight::Sight::at(viewpoint));
     let data = Data {
         points: &points,
         outlier_weight: 0.05,
@@ -275,6 +276,45 @@ fn the_window_misses_nothing() {
         assert!(
             worst < 1e-9,
             "{shape:?}: a window missed {worst} of a point's sum"
+        );
+    }
+}
+
+/// Past the edges of its frame the sensor sees nothing: a frame over the right half of a
+/// ring leaves the normaliser the cells of that half, about half the weight.
+#[test]
+fn the_frames_edges_hide_the_surface_past_them() {
+    use crate::fit::sight::{FieldOfView, Sight};
+    let shape = Shape::new(0.5, 0.5, 0.2, 2.0, 1.0, 1.0);
+    let viewpoint = DVec3::new(0.0, 0.0, -4.0);
+    let seen = |field: Option<FieldOfView>| {
+        normaliser::normaliser(
+            &shape,
+            DQuat::IDENTITY,
+            DVec3::ZERO,
+            Some((Sight { viewpoint, field }, 16.0)),
+            normaliser::FINE,
+            None,
+            false,
+        )
+    };
+    // x / z from 0 to 1 and y / z from -1 to 1, seen from the viewpoint
+    let right_half = FieldOfView::of_pixels(1.0, 1.0, -0.5, 0.5, [0, 0, 1, 2]);
+    let (all, half) = (seen(None), seen(Some(right_half)));
+    let share = half.area / all.area;
+    assert!((0.4..0.6).contains(&share), "{share}");
+    let curves = crate::fit::likelihood::Curves::new(
+        &shape.to_array(),
+        half.range,
+        half.grid.0,
+        half.grid.1,
+    );
+    let cells = curves.cells(&shape.to_array());
+    let visible = half.visible.as_ref().expect("seen");
+    for (centre, seen) in cells.centres.iter().zip(visible) {
+        assert!(
+            !seen || centre.x >= -1e-9,
+            "{centre:?} is left of the frame"
         );
     }
 }

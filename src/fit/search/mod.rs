@@ -94,13 +94,13 @@ pub(super) struct Sample {
 impl Sample {
     /// The sample seen from `viewpoint`; without one, `all_round` says whether the points
     /// cover their object all round (else only their distances are scored).
-    pub(super) fn new(points: &[DVec3], viewpoint: Option<DVec3>, all_round: bool) -> Self {
+    pub(super) fn new(points: &[DVec3], sight: Option<Sight>, all_round: bool) -> Self {
         let volume = likelihood::outlier_volume(points, SIGMA_FLOOR);
         Self {
             points: points.to_vec(),
-            sensor: viewpoint.map(|v| Sensor::new(points, v)),
+            sensor: sight.map(|s| Sensor::new(points, s)),
             outlier_density: LIKELIHOOD_OUTLIER_WEIGHT / volume,
-            distances_only: viewpoint.is_none() && !all_round,
+            distances_only: sight.is_none() && !all_round,
         }
     }
 
@@ -570,7 +570,7 @@ impl ViewTest {
     pub(super) fn new(points: &[DVec3], viewpoint: DVec3, count: usize) -> Self {
         let (norm, sample) = inferred_view::normalised_stride(points, count);
         Self {
-            view: Sample::new(&sample, Some(norm.point(viewpoint)), true),
+            view: Sample::new(&sample, Some(Sight::at(norm.point(viewpoint))), true),
             all_round: Sample::new(&sample, None, true),
             norm,
         }

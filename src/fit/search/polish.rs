@@ -123,7 +123,7 @@ fn refine_both_readings(
             start,
             sigma,
             LIKELIHOOD_OUTLIER_WEIGHT,
-            p.viewpoint,
+            p.sight(),
             &limits,
             iterations,
         )

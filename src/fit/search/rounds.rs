@@ -33,7 +33,7 @@ pub(super) fn round1(
         .collect();
     let samples1: Vec<Sample> = group
         .iter()
-        .map(|(_, p)| Sample::new(&p.stage1_pts, p.viewpoint, true))
+        .map(|(_, p)| Sample::new(&p.stage1_pts, p.sight(), true))
         .collect();
     let sets1: Vec<PointSet> = group.iter().map(|(_, p)| p.stage1_set()).collect();
     evaluator.set_point_sets_with_free_space(&sets1)?;
@@ -132,7 +132,7 @@ pub(super) fn round1(
 
 /// Each cloud's sample for the likelihood as round 1 read it.
 fn sample_of(p: &Prepared, points: &[DVec3], all_round: bool) -> Sample {
-    Sample::new(points, p.viewpoint, all_round)
+    Sample::new(points, p.sight(), all_round)
 }
 
 /// Round 2: round 1's kept candidates, and the other reading of the best one's top view,
