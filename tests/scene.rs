@@ -716,34 +716,77 @@ fn a_detectors_box_gives_the_fit_its_mask_gives() {
     );
 }
 
+/// A frame of `bench scenes` (seed, object count), its labels and truth, and its pixels
+/// back-projected as the scene route reads them.
+struct BenchFrame {
+    scene: supertoroid::synth::scene::TableScene,
+    labels: Vec<u16>,
+    pixels: supertoroid::scene::table::Pixels,
+}
+
+impl BenchFrame {
+    fn new(seed: u64, objects: usize) -> Self {
+        use supertoroid::synth::scene::{random_table_scene, render_scene, with_sensor_noise};
+        let scene = random_table_scene(seed, objects);
+        let rendered = render_scene(&scene, 0.001).unwrap();
+        let depth = with_sensor_noise(&rendered.depth, 0.001, 0.3, seed);
+        let k = scene.camera.intrinsics;
+        let whole = Roi {
+            x: 0,
+            y: 0,
+            width: k.width,
+            height: k.height,
+        };
+        let depth_options = DepthOptions {
+            depth_scale: depth.scale,
+            ..options(&scene.camera, whole)
+        };
+        let pixels = back_project_pixels(&depth, &depth_options, None).unwrap();
+        Self {
+            scene,
+            labels: rendered.labels,
+            pixels,
+        }
+    }
+
+    /// The object most of `pixels` show, if an object is what most of them show.
+    fn owner(&self, pixels: &[(u32, u32)]) -> Option<usize> {
+        use supertoroid::synth::scene::FIRST_OBJECT;
+        let width = self.scene.camera.intrinsics.width;
+        (0..self.scene.objects.len()).find(|&i| {
+            let mine = pixels
+                .iter()
+                .filter(|&&(u, v)| self.labels[(v * width + u) as usize] == FIRST_OBJECT + i as u16)
+                .count();
+            2 * mine > pixels.len()
+        })
+    }
+
+    /// Object `i`'s shape and its pose in the camera's optical frame, where fits are.
+    fn truth(&self, i: usize) -> (Shape, Pose) {
+        let (shape, pose) = self.scene.objects[i];
+        let camera = &self.scene.camera.pose;
+        (
+            shape,
+            Pose::new(
+                camera.rotation.inverse() * pose.rotation,
+                camera.to_canonical(pose.translation),
+            ),
+        )
+    }
+}
+
 #[test]
 fn an_object_the_frames_edge_cuts_is_fitted_past_the_edge_and_warned() {
     use supertoroid::eval::CpuEvaluator;
     use supertoroid::fit::{FitOptions, Model, fit_batch};
-    use supertoroid::scene::fit::{fit_scene, object_clouds};
-    use supertoroid::scene::objects::SceneOptions;
+    use supertoroid::scene::fit::{fit_scene, object_clouds, object_options};
+    use supertoroid::scene::objects::{SceneOptions, segment};
     use supertoroid::suite::chamfer::{CHAMFER_BOUND, relative_chamfer};
-    use supertoroid::synth::scene::{
-        FIRST_OBJECT, random_table_scene, render_scene, with_sensor_noise,
-    };
     // a frame of `bench scenes` whose box (no hole) stands half out of the frame's left
     // edge: 45% of its silhouette is in the frame
     let seed = 830_008;
-    let scene = random_table_scene(seed, 3);
-    let rendered = render_scene(&scene, 0.001).unwrap();
-    let depth = with_sensor_noise(&rendered.depth, 0.001, 0.3, seed);
-    let camera = scene.camera;
-    let whole = Roi {
-        x: 0,
-        y: 0,
-        width: camera.intrinsics.width,
-        height: camera.intrinsics.height,
-    };
-    let depth_options = DepthOptions {
-        depth_scale: depth.scale,
-        ..options(&camera, whole)
-    };
-    let pixels = back_project_pixels(&depth, &depth_options, None).unwrap();
+    let frame = BenchFrame::new(seed, 3);
     let fit_options = FitOptions {
         seed,
         model: Model::Auto,
@@ -752,32 +795,22 @@ fn an_object_the_frames_edge_cuts_is_fitted_past_the_edge_and_warned() {
     let mut evaluator = CpuEvaluator::new();
     let report = fit_scene(
         &mut evaluator,
-        &pixels,
+        &frame.pixels,
         &SceneOptions::default(),
         &fit_options,
     )
     .unwrap();
-    let owner = |o: &supertoroid::scene::fit::SceneObject| {
-        let width = camera.intrinsics.width;
-        let mine = |label: u16| {
-            o.pixels
-                .iter()
-                .filter(|&&(u, v)| rendered.labels[(v * width + u) as usize] == label)
-                .count()
-        };
-        (0..scene.objects.len()).find(|&i| 2 * mine(FIRST_OBJECT + i as u16) > o.pixels.len())
-    };
     let cut_index = report
         .objects
         .iter()
-        .position(|o| owner(o).is_some_and(|i| scene.objects[i].0.a4 == 0.0))
+        .position(|o| {
+            frame
+                .owner(&o.pixels)
+                .is_some_and(|i| frame.scene.objects[i].0.a4 == 0.0)
+        })
         .expect("the box is found");
     let cut = &report.objects[cut_index];
-    let (shape, pose) = scene.objects[owner(cut).unwrap()];
-    let truth = Pose::new(
-        camera.pose.rotation.inverse() * pose.rotation,
-        camera.pose.to_canonical(pose.translation),
-    );
+    let (shape, truth) = frame.truth(frame.owner(&cut.pixels).unwrap());
     let fit = cut.fit.as_ref().unwrap();
     let chamfer = relative_chamfer((&shape, &truth), (&fit.fitted.0, &fit.fitted.1));
     assert!(chamfer < CHAMFER_BOUND, "chamfer {chamfer}: {fit:?}");
@@ -790,10 +823,9 @@ fn an_object_the_frames_edge_cuts_is_fitted_past_the_edge_and_warned() {
     );
     // without the frame's edges the model expects points on the hidden half, finds
     // none, and stops the box at the edge
-    let segmentation =
-        supertoroid::scene::objects::segment(&pixels, &SceneOptions::default(), seed).unwrap();
+    let segmentation = segment(&frame.pixels, &SceneOptions::default(), seed).unwrap();
     let cloud = &object_clouds(&segmentation)[cut_index];
-    let mut blind = supertoroid::scene::fit::object_options(
+    let mut blind = object_options(
         &fit_options,
         &segmentation.plane,
         false,
@@ -819,50 +851,20 @@ fn a_box_on_the_table_is_fitted_standing_from_the_tables_axes() {
     use supertoroid::scene::fit::{object_clouds, object_options};
     use supertoroid::scene::objects::{SceneOptions, segment};
     use supertoroid::suite::chamfer::{CHAMFER_BOUND, relative_chamfer};
-    use supertoroid::synth::scene::{
-        FIRST_OBJECT, random_table_scene, render_scene, with_sensor_noise,
-    };
     // a frame of `bench scenes` with a rounded box 10 x 10 x 8 cm standing on the table,
     // its top and two sides in view: its cloud's principal axes are not the box's
     let seed = 840_009;
-    let scene = random_table_scene(seed, 4);
-    let rendered = render_scene(&scene, 0.001).unwrap();
-    let depth = with_sensor_noise(&rendered.depth, 0.001, 0.3, seed);
-    let camera = scene.camera;
-    let whole = Roi {
-        x: 0,
-        y: 0,
-        width: camera.intrinsics.width,
-        height: camera.intrinsics.height,
-    };
-    let depth_options = DepthOptions {
-        depth_scale: depth.scale,
-        ..options(&camera, whole)
-    };
-    let pixels = back_project_pixels(&depth, &depth_options, None).unwrap();
-    let segmentation = segment(&pixels, &SceneOptions::default(), seed).unwrap();
-    let width = camera.intrinsics.width;
-    let label = |i: usize| FIRST_OBJECT + i as u16;
-    let target = (0..scene.objects.len())
-        .find(|&i| (scene.objects[i].0.a3 - 0.0397).abs() < 5e-4)
+    let frame = BenchFrame::new(seed, 4);
+    let segmentation = segment(&frame.pixels, &SceneOptions::default(), seed).unwrap();
+    let target = (0..frame.scene.objects.len())
+        .find(|&i| (frame.scene.objects[i].0.a3 - 0.0397).abs() < 5e-4)
         .expect("the box");
     let index = segmentation
         .objects
         .iter()
-        .position(|o| {
-            let mine = o
-                .pixels
-                .iter()
-                .filter(|&&(u, v)| rendered.labels[(v * width + u) as usize] == label(target))
-                .count();
-            2 * mine > o.pixels.len()
-        })
+        .position(|o| frame.owner(&o.pixels) == Some(target))
         .expect("the box is found");
-    let (shape, pose) = scene.objects[target];
-    let truth = Pose::new(
-        camera.pose.rotation.inverse() * pose.rotation,
-        camera.pose.to_canonical(pose.translation),
-    );
+    let (shape, truth) = frame.truth(target);
     let cloud = &object_clouds(&segmentation)[index];
     let base = FitOptions {
         seed,

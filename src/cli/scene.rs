@@ -46,9 +46,10 @@ pub struct SceneArgs {
     pub max_size: f64,
     #[arg(long, default_value_t = SceneOptions::default().max_objects)]
     pub max_objects: usize,
-    /// keep each object's fit above the table (see `docs/scenes.md`)
+    /// let each object's fit reach below the table (no free space under it; see
+    /// `docs/scenes.md`)
     #[arg(long)]
-    pub table_prior: bool,
+    pub no_table_prior: bool,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// evaluator: auto, gpu, cpu
@@ -117,7 +118,7 @@ pub fn scene(args: SceneArgs) -> Result<(), Failure> {
         min_size: args.min_size,
         max_size: args.max_size,
         max_objects: args.max_objects,
-        table_prior: args.table_prior,
+        table_prior: !args.no_table_prior,
     };
     let fit_options = FitOptions {
         seed: args.seed,
