@@ -34,7 +34,7 @@ pub mod tables;
 pub use refine::{Limits, Refined, STOP_DECREASE, refine, refine_on, value, value_on};
 
 use crate::eval::Candidate;
-use crate::fit::sight::{FieldOfView, Sight};
+use crate::fit::sight::Sight;
 use crate::model::{Pose, Shape};
 use glam::{DQuat, DVec3};
 use normaliser::Normaliser;
@@ -54,9 +54,8 @@ const CHUNK: usize = 64;
 /// The sensor seen from the model: where it was, and each point's range weight.
 #[derive(Clone, Debug)]
 pub struct Sensor {
-    pub viewpoint: DVec3,
-    /// the edges of its frame, where known: past them it saw nothing
-    pub field: Option<FieldOfView>,
+    /// where it stood, and the edges of its frame where known (past them it saw nothing)
+    pub sight: Sight,
     /// per point: reference / range²
     pub point_weights: Vec<f64>,
     /// the squared range the weights are relative to (a common factor: it cancels)
@@ -74,20 +73,9 @@ impl Sensor {
             .map(|p| reference / (*p - viewpoint).length_squared().max(1e-12))
             .collect();
         Self {
-            viewpoint,
-            field: sight.field,
+            sight,
             point_weights,
             reference,
-        }
-    }
-}
-
-impl Sensor {
-    /// Where it stood and its frame's edges.
-    pub fn sight(&self) -> Sight {
-        Sight {
-            viewpoint: self.viewpoint,
-            field: self.field,
         }
     }
 }
@@ -166,7 +154,7 @@ impl<'a> Objective<'a> {
                 &Self::shape(x),
                 self.rotation(x),
                 DVec3::new(x[6], x[7], x[8]),
-                Some((sensor.sight(), sensor.reference)),
+                Some((sensor.sight, sensor.reference)),
                 self.area_grid,
                 None,
                 false,
@@ -202,7 +190,7 @@ impl<'a> Objective<'a> {
             &shape,
             rotation,
             translation,
-            sensor.map(|s| (s.sight(), s.reference)),
+            sensor.map(|s| (s.sight, s.reference)),
             self.area_grid,
             self.visible.as_deref(),
             with_gradient,
@@ -214,7 +202,7 @@ impl<'a> Objective<'a> {
         let point_term = |i: usize, x_world: DVec3| -> (f64, Vector) {
             let d = x_world - translation;
             let q = inverse * d;
-            let sight = sensor.map(|s| inverse * (x_world - s.viewpoint));
+            let sight = sensor.map(|s| inverse * (x_world - s.sight.viewpoint));
             let sums = window.sums(q, sight, with_gradient);
             let weight = sensor.map_or(1.0, |s| s.point_weights[i]);
             let density = inlier * weight * sums.sum + self.data.outlier_density;
@@ -228,7 +216,7 @@ impl<'a> Objective<'a> {
                 grad[8] = -by_point.z;
                 let mut turn = by_point.cross(d);
                 if let Some(s) = sensor {
-                    turn += (rotation * sums.by_sight).cross(x_world - s.viewpoint);
+                    turn += (rotation * sums.by_sight).cross(x_world - s.sight.viewpoint);
                 }
                 grad[9] = turn.x;
                 grad[10] = turn.y;

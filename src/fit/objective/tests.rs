@@ -47,8 +47,7 @@ fn density_integral(shape: Shape, viewpoint: Option<DVec3>) -> f64 {
         );
         let one = [p];
         let sensor = viewpoint.map(|v| Sensor {
-            viewpoint: v,
-            field: None,
+            sight: crate::fit::sight::Sight::at(v),
             point_weights: vec![reference / (p - v).length_squared()],
             reference,
         });
