@@ -716,68 +716,9 @@ fn a_detectors_box_gives_the_fit_its_mask_gives() {
     );
 }
 
-/// A frame of `bench scenes` (seed, object count), its labels and truth, and its pixels
-/// back-projected as the scene route reads them.
-struct BenchFrame {
-    scene: supertoroid::synth::scene::TableScene,
-    labels: Vec<u16>,
-    pixels: supertoroid::scene::table::Pixels,
-}
-
-impl BenchFrame {
-    fn new(seed: u64, objects: usize) -> Self {
-        use supertoroid::synth::scene::{random_table_scene, render_scene, with_sensor_noise};
-        let scene = random_table_scene(seed, objects);
-        let rendered = render_scene(&scene, 0.001).unwrap();
-        let depth = with_sensor_noise(&rendered.depth, 0.001, 0.3, seed);
-        let k = scene.camera.intrinsics;
-        let whole = Roi {
-            x: 0,
-            y: 0,
-            width: k.width,
-            height: k.height,
-        };
-        let depth_options = DepthOptions {
-            depth_scale: depth.scale,
-            ..options(&scene.camera, whole)
-        };
-        let pixels = back_project_pixels(&depth, &depth_options, None).unwrap();
-        Self {
-            scene,
-            labels: rendered.labels,
-            pixels,
-        }
-    }
-
-    /// The object most of `pixels` show, if an object is what most of them show.
-    fn owner(&self, pixels: &[(u32, u32)]) -> Option<usize> {
-        use supertoroid::synth::scene::FIRST_OBJECT;
-        let width = self.scene.camera.intrinsics.width;
-        (0..self.scene.objects.len()).find(|&i| {
-            let mine = pixels
-                .iter()
-                .filter(|&&(u, v)| self.labels[(v * width + u) as usize] == FIRST_OBJECT + i as u16)
-                .count();
-            2 * mine > pixels.len()
-        })
-    }
-
-    /// Object `i`'s shape and its pose in the camera's optical frame, where fits are.
-    fn truth(&self, i: usize) -> (Shape, Pose) {
-        let (shape, pose) = self.scene.objects[i];
-        let camera = &self.scene.camera.pose;
-        (
-            shape,
-            Pose::new(
-                camera.rotation.inverse() * pose.rotation,
-                camera.to_canonical(pose.translation),
-            ),
-        )
-    }
-}
-
 #[test]
 fn an_object_the_frames_edge_cuts_is_fitted_past_the_edge_and_warned() {
+    use supertoroid::bench::scenes::BenchFrame;
     use supertoroid::eval::CpuEvaluator;
     use supertoroid::fit::{FitOptions, Model, fit_batch};
     use supertoroid::scene::fit::{fit_scene, object_clouds, object_options};
@@ -786,7 +727,7 @@ fn an_object_the_frames_edge_cuts_is_fitted_past_the_edge_and_warned() {
     // a frame of `bench scenes` whose box (no hole) stands half out of the frame's left
     // edge: 45% of its silhouette is in the frame
     let seed = 830_008;
-    let frame = BenchFrame::new(seed, 3);
+    let frame = BenchFrame::new(seed).unwrap();
     let fit_options = FitOptions {
         seed,
         model: Model::Auto,
@@ -846,6 +787,7 @@ fn an_object_the_frames_edge_cuts_is_fitted_past_the_edge_and_warned() {
 
 #[test]
 fn a_box_on_the_table_is_fitted_standing_from_the_tables_axes() {
+    use supertoroid::bench::scenes::BenchFrame;
     use supertoroid::eval::CpuEvaluator;
     use supertoroid::fit::{FitOptions, Model, fit_batch};
     use supertoroid::scene::fit::{object_clouds, object_options};
@@ -854,7 +796,7 @@ fn a_box_on_the_table_is_fitted_standing_from_the_tables_axes() {
     // a frame of `bench scenes` with a rounded box 10 x 10 x 8 cm standing on the table,
     // its top and two sides in view: its cloud's principal axes are not the box's
     let seed = 840_009;
-    let frame = BenchFrame::new(seed, 4);
+    let frame = BenchFrame::new(seed).unwrap();
     let segmentation = segment(&frame.pixels, &SceneOptions::default(), seed).unwrap();
     let target = (0..frame.scene.objects.len())
         .find(|&i| (frame.scene.objects[i].0.a3 - 0.0397).abs() < 5e-4)

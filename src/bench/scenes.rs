@@ -13,9 +13,12 @@ use crate::io::depth::{DepthOptions, PinholeIntrinsics, back_project_pixels};
 use crate::model::{Pose, Shape};
 use crate::scene::fit::fit_scene;
 use crate::scene::objects::SceneOptions;
+use crate::scene::table::Pixels;
 use crate::suite::chamfer::{CHAMFER_BOUND, relative_chamfer};
 use crate::suite::ground_truth::compare;
-use crate::synth::scene::{FIRST_OBJECT, random_table_scene, render_scene, with_sensor_noise};
+use crate::synth::scene::{
+    FIRST_OBJECT, RenderedScene, TableScene, random_table_scene, render_scene, with_sensor_noise,
+};
 use crate::synth::{Camera, render_view};
 use serde::Serialize;
 
@@ -69,6 +72,63 @@ pub struct ScenesReport {
     pub objects: Vec<SceneObjectCase>,
 }
 
+/// One frame of the benchmark: its scene (the truth), the rendered depth and labels, and
+/// the noisy depth's pixels back-projected as `/v1/scene` reads them.
+pub struct BenchFrame {
+    pub scene: TableScene,
+    pub rendered: RenderedScene,
+    pub pixels: Pixels,
+}
+
+impl BenchFrame {
+    /// Frame `seed`: 3-6 objects (3 + seed mod 4), the sensor model above.
+    pub fn new(seed: u64) -> Result<Self, String> {
+        let scene = random_table_scene(seed, 3 + (seed % 4) as usize);
+        let rendered = render_scene(&scene, 0.001)?;
+        let depth = with_sensor_noise(&rendered.depth, NOISE_AT_HALF_METRE, FLYING_SHARE, seed);
+        let k = scene.camera.intrinsics;
+        let options = DepthOptions {
+            intrinsics: PinholeIntrinsics {
+                fx: k.fx,
+                fy: k.fy,
+                cx: k.cx,
+                cy: k.cy,
+            },
+            depth_scale: depth.scale,
+            roi: None,
+            depth_range: None,
+        };
+        let pixels = back_project_pixels(&depth, &options, None).map_err(|e| e.to_string())?;
+        Ok(Self {
+            scene,
+            rendered,
+            pixels,
+        })
+    }
+
+    /// The object most of `pixels` show, if an object is what most of them show.
+    pub fn owner(&self, pixels: &[(u32, u32)]) -> Option<usize> {
+        majority_object(
+            pixels,
+            &self.rendered.labels,
+            self.scene.camera.intrinsics.width,
+        )
+    }
+
+    /// Object `i`'s shape and its pose in the camera's optical frame, where fits are.
+    pub fn truth(&self, i: usize) -> (Shape, Pose) {
+        let (shape, pose) = self.scene.objects[i];
+        let camera = &self.scene.camera.pose;
+        (
+            shape,
+            Pose::new(
+                camera.rotation.inverse() * pose.rotation,
+                camera.to_canonical(pose.translation),
+            ),
+        )
+    }
+}
+
 pub fn run(
     frames: usize,
     seed: u64,
@@ -83,34 +143,14 @@ pub fn run(
     let (mut out_frames, mut out_objects) = (Vec::new(), Vec::new());
     for f in 0..frames {
         let frame_seed = seed + f as u64;
-        let scene = random_table_scene(frame_seed, 3 + (frame_seed % 4) as usize);
-        let rendered = render_scene(&scene, 0.001)?;
-        let depth = with_sensor_noise(
-            &rendered.depth,
-            NOISE_AT_HALF_METRE,
-            FLYING_SHARE,
-            frame_seed,
-        );
-        let k = scene.camera.intrinsics;
-        let options = DepthOptions {
-            intrinsics: PinholeIntrinsics {
-                fx: k.fx,
-                fy: k.fy,
-                cx: k.cx,
-                cy: k.cy,
-            },
-            depth_scale: depth.scale,
-            roi: None,
-            depth_range: None,
-        };
-        let pixels = back_project_pixels(&depth, &options, None).map_err(|e| e.to_string())?;
+        let frame = BenchFrame::new(frame_seed)?;
         let fit_options = FitOptions {
             seed: frame_seed,
             ..base.clone()
         };
         let report = fit_scene(
             evaluator.as_mut(),
-            &pixels,
+            &frame.pixels,
             &SceneOptions::default(),
             &fit_options,
         )
@@ -119,27 +159,23 @@ pub fn run(
         let owner: Vec<Option<usize>> = report
             .objects
             .iter()
-            .map(|o| majority_object(&o.pixels, &rendered.labels, k.width))
+            .map(|o| frame.owner(&o.pixels))
             .collect();
         let phantoms = owner.iter().filter(|o| o.is_none()).count();
         let owned: std::collections::HashSet<usize> = owner.iter().flatten().copied().collect();
         let duplicates = owner.iter().flatten().count() - owned.len();
-        for (i, (shape, pose)) in scene.objects.iter().enumerate() {
-            let visible = rendered
+        for (i, (shape, pose)) in frame.scene.objects.iter().enumerate() {
+            let visible = frame
+                .rendered
                 .labels
                 .iter()
                 .filter(|&&l| l == FIRST_OBJECT + i as u16)
                 .count();
             let mine = owner.iter().position(|o| *o == Some(i));
             let fit = mine.and_then(|s| report.objects[s].fit.as_ref());
-            // the truth in the camera's optical frame, where the fit is
-            let camera = &scene.camera.pose;
-            let truth_pose = Pose::new(
-                camera.rotation.inverse() * pose.rotation,
-                camera.to_canonical(pose.translation),
-            );
+            let (_, truth_pose) = frame.truth(i);
             let holed = shape.a4 > 0.0;
-            let in_frame = silhouette_in_frame(shape, pose, &scene.camera)?;
+            let in_frame = silhouette_in_frame(shape, pose, &frame.scene.camera)?;
             let warned = fit.is_some_and(|r| !r.warnings.is_empty());
             let (model_right, within, chamfer) = match fit {
                 None => (false, false, f64::NAN),
@@ -170,7 +206,7 @@ pub fn run(
         }
         out_frames.push(SceneFrame {
             seed: frame_seed,
-            objects: scene.objects.len(),
+            objects: frame.scene.objects.len(),
             segments: report.objects.len(),
             phantoms,
             duplicates,
@@ -195,9 +231,14 @@ fn silhouette_in_frame(shape: &Shape, pose: &Pose, camera: &Camera) -> Result<f6
     wider.intrinsics.height += 2 * FRAME_PAD;
     wider.intrinsics.cx += FRAME_PAD as f64;
     wider.intrinsics.cy += FRAME_PAD as f64;
-    let whole = render_view(shape, pose, &wider, 0.001)?.pixels.len();
-    let framed = render_view(shape, pose, camera, 0.001)?.pixels.len();
-    Ok(framed as f64 / whole.max(1) as f64)
+    let whole = render_view(shape, pose, &wider, 0.001)?.pixels;
+    let k = camera.intrinsics;
+    let in_frame = |c: u32, size: u32| (FRAME_PAD..FRAME_PAD + size).contains(&c);
+    let framed = whole
+        .iter()
+        .filter(|[u, v]| in_frame(*u, k.width) && in_frame(*v, k.height))
+        .count();
+    Ok(framed as f64 / whole.len().max(1) as f64)
 }
 
 /// How far past the frame [`silhouette_in_frame`] looks: the scenes' objects are at most
