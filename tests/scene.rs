@@ -134,6 +134,51 @@ fn a_box_around_an_object_on_a_table_keeps_the_object_and_a_bare_box_keeps_nothi
     );
 }
 
+/// A ring standing on its rim beside the table's edge of the box (`bench scenes` frame
+/// 750017, object 3): its face is the largest plane in its detector's box, and the table
+/// is the plane behind that face; only the ring is kept.
+#[test]
+fn a_box_whose_object_face_outweighs_the_table_finds_the_table_behind_it() {
+    use supertoroid::bench::boxes::detector_box;
+    use supertoroid::bench::scenes::BenchFrame;
+    use supertoroid::synth::scene::FIRST_OBJECT;
+    let frame = BenchFrame::new(750_017).unwrap();
+    let label = FIRST_OBJECT + 3;
+    let mask: Vec<bool> = frame.rendered.labels.iter().map(|&l| l == label).collect();
+    let boxed = DepthOptions {
+        roi: Some(detector_box(&mask, frame.depth.width)),
+        ..frame.depth_options.clone()
+    };
+    let pixels = back_project_pixels(&frame.depth, &boxed, None).unwrap();
+    let up = frame.scene.camera.pose.rotation.inverse() * DVec3::from(frame.scene.table.normal);
+    // (the largest plane in the box is not the table)
+    let mut depths: Vec<f64> = pixels.points.iter().map(|p| p.z).collect();
+    depths.sort_by(f64::total_cmp);
+    let tolerance = supertoroid::scene::table::TABLE_TOLERANCE * depths[depths.len() / 2];
+    let largest = fit_plane(&pixels.points, tolerance, 750_017).unwrap();
+    assert!(
+        largest.plane.normal().dot(up).abs() < 0.5,
+        "{:?}",
+        largest.plane
+    );
+    let TableOutcome::Removed { plane, object, .. } = remove_table(&pixels, 750_017) else {
+        panic!("no table found");
+    };
+    assert!(plane.normal().dot(up) > 0.9998, "{plane:?}");
+    // the object kept is the ring's pixels: nearly all of them, and little else
+    let visible = mask.iter().filter(|&&m| m).count();
+    assert!(
+        object.len() as f64 > 0.95 * visible as f64,
+        "{} of {visible}",
+        object.len()
+    );
+    assert!(
+        (object.len() as f64) < 1.02 * visible as f64,
+        "{} of {visible}",
+        object.len()
+    );
+}
+
 #[test]
 fn the_depth_route_with_only_a_box_fits_the_object_and_refuses_a_bare_table() {
     use base64::Engine;
@@ -839,4 +884,34 @@ fn a_box_on_the_table_is_fitted_standing_from_the_tables_axes() {
     let lying = fit(&resting);
     let axis = lying.fitted.1.rotation * DVec3::Z;
     assert!(axis.dot(up).abs() < 0.5, "axis {axis}, table normal {up}");
+}
+
+/// `/v1/fit/depth`'s options: a box whose table was found is fitted as resting on that
+/// table (its starts, and no reach below it), as a scene's object is; a mask's pixels
+/// (no table) from the camera alone; a viewpoint the caller gave stands.
+#[test]
+fn a_boxs_table_makes_its_object_rest_on_it_and_a_mask_is_seen_from_the_camera() {
+    use supertoroid::fit::{FieldOfView, FitOptions, Viewpoint, ViewpointSource};
+    use supertoroid::scene::fit::depth_options;
+    let field = FieldOfView::of_pixels(615.0, 615.0, 320.0, 240.0, [100, 80, 200, 150]);
+    let table = Plane::through(DVec3::new(0.0, 0.1, 0.6), DVec3::new(0.0, -0.7, -0.7));
+    let camera = |o: &FitOptions| {
+        matches!(o.viewpoint, Viewpoint::At(v, ViewpointSource::Camera) if v == DVec3::ZERO)
+            && o.field_of_view.is_some()
+    };
+    let boxed = depth_options(&FitOptions::default(), Some(&table), field);
+    assert!(camera(&boxed), "{:?}", boxed.viewpoint);
+    assert_eq!(boxed.resting_on, Some(table));
+    assert_eq!(boxed.support, Some(table));
+    let masked = depth_options(&FitOptions::default(), None, field);
+    assert!(camera(&masked), "{:?}", masked.viewpoint);
+    assert_eq!((masked.resting_on, masked.support), (None, None));
+    let given = FitOptions {
+        viewpoint: Viewpoint::None,
+        ..Default::default()
+    };
+    let kept = depth_options(&given, Some(&table), field);
+    assert_eq!(kept.viewpoint, Viewpoint::None);
+    assert_eq!(kept.field_of_view, None);
+    assert_eq!(kept.resting_on, Some(table));
 }

@@ -5,6 +5,7 @@
 //! CSV (for machines) and markdown (for people), with the machine and git revision.
 
 pub mod ablation;
+pub mod boxes;
 pub mod grasps;
 pub mod models;
 pub mod paper;

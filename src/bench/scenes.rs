@@ -8,7 +8,7 @@
 
 use super::{Report, percentile};
 use crate::eval::{Backend, make_evaluator};
-use crate::fit::{FitOptions, Model};
+use crate::fit::{FitOptions, FitReport, Model};
 use crate::io::depth::{DepthOptions, PinholeIntrinsics, back_project_pixels};
 use crate::model::{Pose, Shape};
 use crate::scene::fit::fit_scene;
@@ -19,7 +19,7 @@ use crate::suite::ground_truth::compare;
 use crate::synth::scene::{
     FIRST_OBJECT, RenderedScene, TableScene, random_table_scene, render_scene, with_sensor_noise,
 };
-use crate::synth::{Camera, render_view};
+use crate::synth::{Camera, DepthImage, render_view};
 use serde::Serialize;
 
 /// The sensor model of the suite: 1 mm of depth noise at 0.5 m (growing with the range
@@ -77,6 +77,9 @@ pub struct ScenesReport {
 pub struct BenchFrame {
     pub scene: TableScene,
     pub rendered: RenderedScene,
+    /// the depth as the sensor gives it (noise, quantisation, flying pixels)
+    pub depth: DepthImage,
+    pub depth_options: DepthOptions,
     pub pixels: Pixels,
 }
 
@@ -102,6 +105,8 @@ impl BenchFrame {
         Ok(Self {
             scene,
             rendered,
+            depth,
+            depth_options: options,
             pixels,
         })
     }
@@ -177,20 +182,11 @@ pub fn run(
             let holed = shape.a4 > 0.0;
             let in_frame = silhouette_in_frame(shape, pose, &frame.scene.camera)?;
             let warned = fit.is_some_and(|r| !r.warnings.is_empty());
-            let (model_right, within, chamfer) = match fit {
-                None => (false, false, f64::NAN),
-                Some(r) => {
-                    let chamfer =
-                        relative_chamfer((shape, &truth_pose), (&r.fitted.0, &r.fitted.1));
-                    let model_right = (r.model.kind == Model::Supertoroid) == holed;
-                    let within = if holed {
-                        compare((shape, &truth_pose), (&r.fitted.0, &r.fitted.1)).success()
-                    } else {
-                        chamfer < CHAMFER_BOUND
-                    };
-                    (model_right, within, chamfer)
-                }
-            };
+            let Judged {
+                model_right,
+                within,
+                chamfer,
+            } = judge(shape, &truth_pose, fit);
             out_objects.push(SceneObjectCase {
                 frame: frame_seed,
                 holed,
@@ -223,9 +219,52 @@ pub fn run(
     })
 }
 
+/// An object's fit against its truth: the model right (a hole or none), and the fit
+/// within the model-choice suite's rule (the ground-truth rule for a holed object, the
+/// surface chamfer under [`CHAMFER_BOUND`] of its size for one without).
+pub struct Judged {
+    pub model_right: bool,
+    pub within: bool,
+    /// the relative surface chamfer distance to the truth (NaN without a fit)
+    pub chamfer: f64,
+}
+
+impl Judged {
+    pub fn right(&self) -> bool {
+        self.model_right && self.within
+    }
+}
+
+/// [`Judged`] for `fit` (none: not found) of the object `shape` at `truth` (the camera's
+/// optical frame).
+pub fn judge(shape: &Shape, truth: &Pose, fit: Option<&FitReport>) -> Judged {
+    let Some(r) = fit else {
+        return Judged {
+            model_right: false,
+            within: false,
+            chamfer: f64::NAN,
+        };
+    };
+    let holed = shape.a4 > 0.0;
+    let chamfer = relative_chamfer((shape, truth), (&r.fitted.0, &r.fitted.1));
+    Judged {
+        model_right: (r.model.kind == Model::Supertoroid) == holed,
+        within: if holed {
+            compare((shape, truth), (&r.fitted.0, &r.fitted.1)).success()
+        } else {
+            chamfer < CHAMFER_BOUND
+        },
+        chamfer,
+    }
+}
+
 /// The share of an object's silhouette, seen alone, that lies in the camera's frame
 /// (against a camera whose frame is wider by [`FRAME_PAD`] pixels on every side).
-fn silhouette_in_frame(shape: &Shape, pose: &Pose, camera: &Camera) -> Result<f64, String> {
+pub(super) fn silhouette_in_frame(
+    shape: &Shape,
+    pose: &Pose,
+    camera: &Camera,
+) -> Result<f64, String> {
     let mut wider = *camera;
     wider.intrinsics.width += 2 * FRAME_PAD;
     wider.intrinsics.height += 2 * FRAME_PAD;

@@ -121,7 +121,8 @@ pub struct BenchArgs {
     /// pipeline for the fits (paper, synthetic): default (the search) or paper
     #[arg(long, global = true, value_enum, default_value = "default")]
     pub method: crate::fit::Method,
-    /// model of the fits: as `fit --model` (default: as `fit`; auto for `models`)
+    /// model of the fits: as `fit --model` (default: as `fit`; auto for `models`, `scenes`
+    /// and `boxes`)
     #[arg(long, global = true, value_enum)]
     pub model: Option<crate::fit::Model>,
     /// the fits' time budget in milliseconds (paper, synthetic; see `fit --time-budget-ms`)
@@ -202,6 +203,15 @@ pub enum BenchCommand {
     /// Synthetic table-top frames (3-6 objects, with a hole and without, a D435-like
     /// sensor), segmented and fitted as `/v1/scene` does.
     Scenes {
+        #[arg(long, default_value_t = 20)]
+        frames: usize,
+        #[arg(long, default_value_t = crate::bench::synthetic::DEFAULT_SEED)]
+        seed: u64,
+    },
+    /// The objects of `scenes`' frames fitted as `/v1/fit/depth` fits them from a
+    /// detector's box (the table in it taken away) and from a segmenter's mask: each
+    /// against the truth, and the two against each other.
+    Boxes {
         #[arg(long, default_value_t = 20)]
         frames: usize,
         #[arg(long, default_value_t = crate::bench::synthetic::DEFAULT_SEED)]
@@ -744,6 +754,15 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
                 ..options.clone()
             };
             let r = crate::bench::scenes::run(*frames, *seed, backend, &options)
+                .map_err(Failure::input)?;
+            write(&|d| write_report(d, &r), r.markdown())
+        }
+        BenchCommand::Boxes { frames, seed } => {
+            let options = crate::fit::FitOptions {
+                model: args.model.unwrap_or(crate::fit::Model::Auto),
+                ..options.clone()
+            };
+            let r = crate::bench::boxes::run(*frames, *seed, backend, &options)
                 .map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }

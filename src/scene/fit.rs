@@ -158,20 +158,46 @@ pub fn object_options(
     seen_through: &[DVec3],
     field_of_view: FieldOfView,
 ) -> FitOptions {
-    let (viewpoint, field_of_view) = match options.viewpoint {
-        Viewpoint::Auto => (
-            Viewpoint::At(DVec3::ZERO, ViewpointSource::Camera),
-            Some(field_of_view),
-        ),
-        given => (given, options.field_of_view),
-    };
     FitOptions {
         seen_through: seen_through.to_vec(),
-        viewpoint,
-        field_of_view,
         support: table_prior.then_some(*table),
         resting_on: Some(*table),
-        ..options.clone()
+        ..seen_from_camera(options, field_of_view)
+    }
+}
+
+/// The fit options of a depth frame's pixels (`/v1/fit/depth`): seen from the camera
+/// within the edges of the pixels read ([`seen_from_camera`]); where a table was taken
+/// out of a detector's box, the object rests on it as a scene's object does
+/// ([`object_options`], with the scene's default table prior).
+pub fn depth_options(
+    options: &FitOptions,
+    table: Option<&Plane>,
+    field_of_view: FieldOfView,
+) -> FitOptions {
+    match table {
+        Some(table) => object_options(
+            options,
+            table,
+            SceneOptions::default().table_prior,
+            &[],
+            field_of_view,
+        ),
+        None => seen_from_camera(options, field_of_view),
+    }
+}
+
+/// A depth frame's points are in the camera's optical frame: unless the caller gave
+/// another viewpoint, the sensor is the origin and saw nothing past the edges of the
+/// pixels read (`field_of_view`).
+fn seen_from_camera(options: &FitOptions, field_of_view: FieldOfView) -> FitOptions {
+    match options.viewpoint {
+        Viewpoint::Auto => FitOptions {
+            viewpoint: Viewpoint::At(DVec3::ZERO, ViewpointSource::Camera),
+            field_of_view: Some(field_of_view),
+            ..options.clone()
+        },
+        _ => options.clone(),
     }
 }
 

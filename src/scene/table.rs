@@ -1,6 +1,7 @@
 //! The table in a depth frame's box: where a plane holds a good share of the box's
 //! pixels (the table around and under the object) and has the rest on the camera's side
-//! (else it is a face of the object), its pixels and those below it go,
+//! (else it is a face of the object, and the table is looked for off it), its pixels
+//! and those below it go,
 //! and the object is the largest 8-connected region of what is left, neighbours joined
 //! where their depths differ by less than [`DEPTH_JUMP`] of the depth. What a detector's
 //! box gives: the object and the table around it.
@@ -20,6 +21,9 @@ pub const DEPTH_JUMP: f64 = 0.02;
 /// The object must keep at least this many points, and this share of the box's.
 pub const MIN_OBJECT_POINTS: usize = 50;
 pub const MIN_OBJECT_SHARE: f64 = 0.02;
+/// The most planes tried for the table: the largest plane in a box can be a face of the
+/// object (a box's front, a ring standing on its rim), and the table is then the next.
+pub const MAX_PLANES: usize = 3;
 
 /// Back-projected pixels: points with their pixel positions.
 pub struct Pixels {
@@ -59,54 +63,59 @@ pub fn remove_table(pixels: &Pixels, seed: u64) -> TableOutcome {
         .select_nth_unstable_by(points.len() / 2, f64::total_cmp)
         .1;
     let tolerance = TABLE_TOLERANCE * median;
-    let Some(PlaneFit {
-        plane,
-        inliers,
-        inlier_count,
-    }) = fit_plane(points, tolerance, seed)
-    else {
-        return TableOutcome::NoTable;
-    };
-    if (inlier_count as f64) < MIN_TABLE_SHARE * points.len() as f64 {
-        return TableOutcome::NoTable;
-    }
-    // the normal towards the camera (the origin of the optical frame)
-    let plane = if plane.signed_distance(DVec3::ZERO) < 0.0 {
-        Plane {
-            normal: (-plane.normal()).to_array(),
-            offset: -plane.offset,
-        }
-    } else {
-        plane
-    };
-    let above: Vec<bool> = points
-        .iter()
-        .zip(&inliers)
-        .map(|(&p, &on)| !on && plane.signed_distance(p) > 0.0)
-        .collect();
     let enough = MIN_OBJECT_POINTS.max((MIN_OBJECT_SHARE * points.len() as f64) as usize);
-    // a table has the object on the camera's side; a plane with more of the rest behind
-    // it is a face of the object itself (a box's top seen from above)
-    let (n_above, n_off) = (
-        above.iter().filter(|&&a| a).count(),
-        inliers.iter().filter(|&&on| !on).count(),
-    );
-    let behind = n_off - n_above;
-    if behind >= enough && behind > n_above {
-        return TableOutcome::NoTable;
-    }
-    let object = largest_region(pixels, &above);
-    if object.len() < enough {
-        return TableOutcome::NothingOnIt {
+    // the points no face of the object found so far holds
+    let mut left: Vec<usize> = (0..points.len()).collect();
+    for _ in 0..MAX_PLANES {
+        let candidates: Vec<DVec3> = left.iter().map(|&i| points[i]).collect();
+        let Some(PlaneFit { plane, .. }) = fit_plane(&candidates, tolerance, seed) else {
+            return TableOutcome::NoTable;
+        };
+        let inliers: Vec<bool> = points
+            .iter()
+            .map(|&p| plane.signed_distance(p).abs() <= tolerance)
+            .collect();
+        let inlier_count = inliers.iter().filter(|&&on| on).count();
+        if (inlier_count as f64) < MIN_TABLE_SHARE * points.len() as f64 {
+            return TableOutcome::NoTable;
+        }
+        // the normal towards the camera (the origin of the optical frame)
+        let plane = if plane.signed_distance(DVec3::ZERO) < 0.0 {
+            Plane {
+                normal: (-plane.normal()).to_array(),
+                offset: -plane.offset,
+            }
+        } else {
+            plane
+        };
+        let above: Vec<bool> = points
+            .iter()
+            .zip(&inliers)
+            .map(|(&p, &on)| !on && plane.signed_distance(p) > 0.0)
+            .collect();
+        // a table has the object on the camera's side; a plane with more of the rest
+        // behind it is a face of the object itself (a box's front, a standing ring's
+        // side): the table is looked for among the points off that face
+        let n_above = above.iter().filter(|&&a| a).count();
+        let behind = (points.len() - inlier_count) - n_above;
+        if behind >= enough && behind > n_above {
+            left.retain(|&i| !inliers[i]);
+            continue;
+        }
+        let object = largest_region(pixels, &above);
+        if object.len() < enough {
+            return TableOutcome::NothingOnIt {
+                plane,
+                left: object.len(),
+            };
+        }
+        return TableOutcome::Removed {
             plane,
-            left: object.len(),
+            table_points: inlier_count,
+            object,
         };
     }
-    TableOutcome::Removed {
-        plane,
-        table_points: inlier_count,
-        object,
-    }
+    TableOutcome::NoTable
 }
 
 /// The points of the largest 8-connected region of kept pixels, neighbours joined where

@@ -8,7 +8,7 @@ use super::error::{ApiError, ErrorBody, ErrorCode, ErrorDetail};
 use super::fitter::{FitJob, Readiness};
 use super::metrics::{CodeLabel, RouteLabel, RouteStatus};
 use crate::eval::Backend;
-use crate::fit::{FitOptions, FitReport, Viewpoint, ViewpointSource};
+use crate::fit::{FitOptions, FitReport, Viewpoint};
 use crate::io::depth::{self, DepthOptions, PinholeIntrinsics, Roi};
 use crate::io::{Format, ReadLimits};
 use axum::body::{Body, Bytes};
@@ -581,12 +581,8 @@ async fn fit_depth(
         field_of_view,
     } = depth_points(&state, &params, depth_bytes, mask_bytes)?;
     let mut job = params.options.job(points)?;
-    // a depth frame's points are in the camera's optical frame: the sensor is the origin,
-    // and it saw nothing past the edges of the image (or the box) they were read from
-    if job.options.viewpoint == Viewpoint::Auto {
-        job.options.viewpoint = Viewpoint::At(DVec3::ZERO, ViewpointSource::Camera);
-        job.options.field_of_view = Some(field_of_view);
-    }
+    // seen from the camera, within the image (or the box); resting on the table a box held
+    job.options = crate::scene::fit::depth_options(&job.options, table.as_ref(), field_of_view);
     let mut fit = fit_one(&state, job).await?;
     if fit.shape.size() > max_size {
         return Err(ApiError::unprocessable(
