@@ -704,7 +704,8 @@ fn the_scene_command_prints_the_objects_that_export_reads_and_refuses_a_bare_tab
 }
 
 /// What a detector gives (a box) and what a segmenter gives (a mask) end in the same fit:
-/// the table the box holds is taken away before the fit.
+/// the table the box holds is taken away before the fit, and the mask's object rests on
+/// the table found around the mask.
 #[test]
 fn a_detectors_box_gives_the_fit_its_mask_gives() {
     use base64::Engine;
@@ -744,14 +745,20 @@ fn a_detectors_box_gives_the_fit_its_mask_gives() {
             .unwrap();
         assert_eq!(r.status().as_u16(), 200);
         let v: Value = r.json().unwrap();
+        let table: Plane = serde_json::from_value(v["table"].clone()).unwrap();
         let object: supertoroid::model::FittedObject = serde_json::from_value(v).unwrap();
-        object.validated().unwrap()
+        (object.validated().unwrap(), table)
     };
-    let boxed = fit_with(
+    let (boxed, box_table) = fit_with(
         "roi",
         json!({"x": roi.x, "y": roi.y, "width": roi.width, "height": roi.height}),
     );
-    let masked = fit_with("mask_png", json!(b64(&mask)));
+    let (masked, mask_table) = fit_with("mask_png", json!(b64(&mask)));
+    // both find the table (the mask's around it), and both fits rest on it
+    let up = camera.pose.rotation.inverse() * DVec3::Z;
+    for table in [box_table, mask_table] {
+        assert!(table.normal().dot(up) > 0.9998, "{table:?}");
+    }
     let e = supertoroid::suite::ground_truth::compare((&masked.0, &masked.1), (&boxed.0, &boxed.1));
     assert!(
         e.centre < 0.01 && e.axis_degrees < 2.0 && e.sizes < 0.05 && e.eps < 0.1,

@@ -13,7 +13,7 @@ use crate::fit::{FitOptions, FitReport, fit};
 use crate::io::depth::{DepthOptions, Roi, back_project_pixels};
 use crate::scene::fit::depth_options;
 use crate::scene::objects::SceneOptions;
-use crate::scene::table::{Pixels, TableOutcome, remove_table};
+use crate::scene::table::{Pixels, TableOutcome, remove_table, table_beside, widened_box};
 use crate::suite::chamfer::{CHAMFER_BOUND, relative_chamfer};
 use crate::synth::scene::FIRST_OBJECT;
 use serde::Serialize;
@@ -90,7 +90,8 @@ pub fn run(
                 fit_box(evaluator.as_mut(), read(&boxed, None)?, &options)?;
             let start = Instant::now();
             let masked = read(&frame.depth_options, Some(&mask))?;
-            let mask_options = depth_options(&options, None, masked.field_of_view);
+            let beside = table_beside(&frame.depth, &frame.depth_options, &masked, options.seed);
+            let mask_options = depth_options(&options, beside.as_ref(), masked.field_of_view);
             let mask_fit = fit(evaluator.as_mut(), &masked.points, &mask_options).ok();
             let mask_ms = start.elapsed().as_secs_f64() * 1e3;
             let (by_box, by_mask) = (
@@ -135,21 +136,11 @@ pub fn run(
 /// The bounding box of the mask's pixels, widened by [`BOX_PAD`] on every side (the
 /// reading clips it to the image).
 pub fn detector_box(mask: &[bool], width: u32) -> Roi {
-    let (mut lo, mut hi) = ([u32::MAX; 2], [0u32; 2]);
-    for (i, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
-        let p = [i as u32 % width, i as u32 / width];
-        for k in 0..2 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    let pad = |k: usize| (BOX_PAD * (hi[k] - lo[k] + 1) as f64).round() as i64;
-    Roi {
-        x: lo[0] as i64 - pad(0),
-        y: lo[1] as i64 - pad(1),
-        width: hi[0] - lo[0] + 1 + 2 * pad(0) as u32,
-        height: hi[1] - lo[1] + 1 + 2 * pad(1) as u32,
-    }
+    let pixels: Vec<(u32, u32)> = (0..mask.len() as u32)
+        .filter(|&i| mask[i as usize])
+        .map(|i| (i % width, i / width))
+        .collect();
+    widened_box(&pixels, BOX_PAD).expect("an object in view has pixels")
 }
 
 /// The box's pixels fitted as `/v1/fit/depth` fits a box without a mask: the fit (none

@@ -7,7 +7,9 @@
 //! box gives: the object and the table around it.
 
 use super::plane::{PlaneFit, fit_plane};
+use crate::io::depth::{DepthOptions, Roi, back_project_pixels};
 use crate::model::Plane;
+use crate::synth::DepthImage;
 use glam::DVec3;
 
 /// A plane is the table when it holds at least this share of the box's points.
@@ -116,6 +118,54 @@ pub fn remove_table(pixels: &Pixels, seed: u64) -> TableOutcome {
         };
     }
     TableOutcome::NoTable
+}
+
+/// How much wider than a masked object's pixels the box is that its table is looked for
+/// in ([`table_beside`]), on each side, as a share of the box's width (and height): as
+/// loose as a detector's box.
+pub const TABLE_BESIDE_PAD: f64 = 0.1;
+
+/// The table a masked object stands on: found as in a detector's box ([`remove_table`])
+/// in the bounding box of the object's pixels widened by [`TABLE_BESIDE_PAD`], read from
+/// `image` without the mask; None where that box holds no table with something on it.
+pub fn table_beside(
+    image: &DepthImage,
+    options: &DepthOptions,
+    object: &Pixels,
+    seed: u64,
+) -> Option<Plane> {
+    let around = DepthOptions {
+        roi: Some(widened_box(&object.pixels, TABLE_BESIDE_PAD)?),
+        ..options.clone()
+    };
+    match remove_table(&back_project_pixels(image, &around, None).ok()?, seed) {
+        TableOutcome::Removed { plane, .. } => Some(plane),
+        _ => None,
+    }
+}
+
+/// The bounding box of `pixels` widened by `pad` of its width and height on every side
+/// (reading it clips it to the image); None for no pixels.
+pub fn widened_box(pixels: &[(u32, u32)], pad: f64) -> Option<Roi> {
+    let (u0, v0, u1, v1) = pixels
+        .iter()
+        .fold((u32::MAX, u32::MAX, 0, 0), |(a, b, c, d), &(u, v)| {
+            (a.min(u), b.min(v), c.max(u), d.max(v))
+        });
+    if pixels.is_empty() {
+        return None;
+    }
+    let (w, h) = (u1 - u0 + 1, v1 - v0 + 1);
+    let (pu, pv) = (
+        (pad * w as f64).round() as u32,
+        (pad * h as f64).round() as u32,
+    );
+    Some(Roi {
+        x: u0 as i64 - pu as i64,
+        y: v0 as i64 - pv as i64,
+        width: w + 2 * pu,
+        height: h + 2 * pv,
+    })
 }
 
 /// The points of the largest 8-connected region of kept pixels, neighbours joined where

@@ -181,8 +181,8 @@ pub struct FitResponse {
     pub fit: FitReport,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub grasps: Option<crate::grasp::GraspsOut>,
-    /// depth frames with a box and no mask: the table found in the box and taken away
-    /// (normal towards the camera)
+    /// depth frames: the table the object rests on (normal towards the camera), found in
+    /// a box without a mask and taken away, or found around a mask's object
     #[serde(skip_serializing_if = "Option::is_none")]
     pub table: Option<crate::model::Plane>,
 }
@@ -742,13 +742,8 @@ impl Frame {
         depth: DepthBytes,
         mask: Option<Vec<u8>>,
     ) -> Result<(crate::scene::table::Pixels, crate::synth::DepthImage, bool), ApiError> {
-        let intrinsics = self.intrinsics.ok_or_else(|| {
-            ApiError::unprocessable(
-                "invalid_depth_options",
-                "intrinsics {fx, fy, cx, cy} are required",
-            )
-        })?;
-        let scale = self.depth_scale.unwrap_or_else(depth::default_depth_scale);
+        let options = self.depth_options()?;
+        let scale = options.depth_scale;
         let image = match depth {
             DepthBytes::Png(png) => depth::decode_depth_png(&png, scale, self.size, limits(state))?,
             DepthBytes::Raw(raw) => {
@@ -764,14 +759,24 @@ impl Frame {
         let mask = mask
             .map(|m| depth::decode_mask_png(&m, image.width, image.height, limits(state)))
             .transpose()?;
-        let options = DepthOptions {
-            intrinsics,
-            depth_scale: scale,
-            roi: self.roi,
-            depth_range: self.depth_range,
-        };
         let selected = depth::back_project_pixels(&image, &options, mask.as_deref())?;
         Ok((selected, image, mask.is_some()))
+    }
+
+    /// How the frame's pixels are read (its intrinsics are required).
+    pub fn depth_options(&self) -> Result<DepthOptions, ApiError> {
+        let intrinsics = self.intrinsics.ok_or_else(|| {
+            ApiError::unprocessable(
+                "invalid_depth_options",
+                "intrinsics {fx, fy, cx, cy} are required",
+            )
+        })?;
+        Ok(DepthOptions {
+            intrinsics,
+            depth_scale: self.depth_scale.unwrap_or_else(depth::default_depth_scale),
+            roi: self.roi,
+            depth_range: self.depth_range,
+        })
     }
 }
 
@@ -780,7 +785,7 @@ struct DepthPoints {
     points: Vec<DVec3>,
     /// for the report (an ROI clipped to the image)
     notes: Vec<String>,
-    /// the table taken out of a box
+    /// the table taken out of a box, or found beside a mask's object
     table: Option<crate::model::Plane>,
     /// the edges of the pixels read
     field_of_view: crate::fit::FieldOfView,
@@ -803,12 +808,14 @@ fn depth_points(
     let (selected, image, has_mask) = frame.back_project(state, depth, mask)?;
     let field_of_view = selected.field_of_view;
     let intrinsics = params.intrinsics.expect("checked by back_project");
+    let seed = params.options.seed.unwrap_or(0);
     let mut notes: Vec<String> = Vec::new();
     let mut table = None;
-    // a box without a mask holds the table around the object: take it away
+    // a box without a mask holds the table around the object: take it away; a mask's
+    // object has its table around the mask
     let points = if params.roi.is_some() && !has_mask {
         use crate::scene::table::{TableOutcome, remove_table};
-        match remove_table(&selected, params.options.seed.unwrap_or(0)) {
+        match remove_table(&selected, seed) {
             TableOutcome::NoTable => selected.points,
             TableOutcome::Removed { plane, object, .. } => {
                 table = Some(plane);
@@ -825,6 +832,10 @@ fn depth_points(
             }
         }
     } else {
+        if has_mask {
+            let read = frame.depth_options()?;
+            table = crate::scene::table::table_beside(&image, &read, &selected, seed);
+        }
         selected.points
     };
     let pixels = image.width as f64 * image.height as f64;
