@@ -253,7 +253,7 @@ fn seen_through(object: &Segment, table: &[usize], frame: &Pixels, margin: f64) 
 }
 
 /// The plane with its normal towards the origin (the camera).
-fn towards_the_camera(plane: Plane) -> Plane {
+pub(super) fn towards_the_camera(plane: Plane) -> Plane {
     if plane.signed_distance(DVec3::ZERO) < 0.0 {
         Plane {
             normal: (-plane.normal()).to_array(),

@@ -6,6 +6,7 @@
 //! where their depths differ by less than [`DEPTH_JUMP`] of the depth. What a detector's
 //! box gives: the object and the table around it.
 
+use super::objects::towards_the_camera;
 use super::plane::{PlaneFit, fit_plane};
 use crate::io::depth::{DepthOptions, Roi, back_project_pixels};
 use crate::model::Plane;
@@ -81,15 +82,7 @@ pub fn remove_table(pixels: &Pixels, seed: u64) -> TableOutcome {
         if (inlier_count as f64) < MIN_TABLE_SHARE * points.len() as f64 {
             return TableOutcome::NoTable;
         }
-        // the normal towards the camera (the origin of the optical frame)
-        let plane = if plane.signed_distance(DVec3::ZERO) < 0.0 {
-            Plane {
-                normal: (-plane.normal()).to_array(),
-                offset: -plane.offset,
-            }
-        } else {
-            plane
-        };
+        let plane = towards_the_camera(plane);
         let above: Vec<bool> = points
             .iter()
             .zip(&inliers)
@@ -147,14 +140,14 @@ pub fn table_beside(
 /// The bounding box of `pixels` widened by `pad` of its width and height on every side
 /// (reading it clips it to the image); None for no pixels.
 pub fn widened_box(pixels: &[(u32, u32)], pad: f64) -> Option<Roi> {
+    if pixels.is_empty() {
+        return None;
+    }
     let (u0, v0, u1, v1) = pixels
         .iter()
         .fold((u32::MAX, u32::MAX, 0, 0), |(a, b, c, d), &(u, v)| {
             (a.min(u), b.min(v), c.max(u), d.max(v))
         });
-    if pixels.is_empty() {
-        return None;
-    }
     let (w, h) = (u1 - u0 + 1, v1 - v0 + 1);
     let (pu, pv) = (
         (pad * w as f64).round() as u32,
