@@ -13,8 +13,9 @@ use crate::fit::{FitOptions, FitReport, fit};
 use crate::io::depth::{DepthOptions, Roi, back_project_pixels};
 use crate::scene::fit::depth_options;
 use crate::scene::objects::SceneOptions;
-use crate::scene::table::{Pixels, TableOutcome, remove_table, table_beside, widened_box};
+use crate::scene::table::{DepthObject, Pixels, Selection, depth_object, widened_box};
 use crate::suite::chamfer::{CHAMFER_BOUND, relative_chamfer};
+use crate::synth::DepthImage;
 use crate::synth::scene::FIRST_OBJECT;
 use serde::Serialize;
 use std::time::Instant;
@@ -79,26 +80,28 @@ pub fn run(
                 continue;
             }
             let (_, truth) = frame.truth(i);
-            let read = |depth: &DepthOptions, mask: Option<&[bool]>| {
-                back_project_pixels(&frame.depth, depth, mask).map_err(|e| e.to_string())
-            };
             let boxed = DepthOptions {
                 roi: Some(detector_box(&mask, frame.depth.width)),
                 ..frame.depth_options.clone()
             };
-            let (box_fit, table_found, box_refused, box_ms) =
-                fit_box(evaluator.as_mut(), read(&boxed, None)?, &options)?;
-            let start = Instant::now();
-            let masked = read(&frame.depth_options, Some(&mask))?;
-            let beside = table_beside(&frame.depth, &frame.depth_options, &masked, options.seed);
-            let mask_options = depth_options(&options, beside.as_ref(), masked.field_of_view);
-            let mask_fit = fit(evaluator.as_mut(), &masked.points, &mask_options).ok();
-            let mask_ms = start.elapsed().as_secs_f64() * 1e3;
-            let (by_box, by_mask) = (
-                judge(shape, &truth, box_fit.as_ref()),
-                judge(shape, &truth, mask_fit.as_ref()),
+            let mut fit_as = |read: &DepthOptions, mask: Option<&[bool]>, selection| {
+                let pixels =
+                    back_project_pixels(&frame.depth, read, mask).map_err(|e| e.to_string())?;
+                Ok::<_, String>(fit_depth_object(
+                    evaluator.as_mut(),
+                    pixels,
+                    (&frame.depth, read),
+                    selection,
+                    &options,
+                ))
+            };
+            let by_box = fit_as(&boxed, None, Selection::DetectorBox)?;
+            let by_mask = fit_as(&frame.depth_options, Some(&mask), Selection::Mask)?;
+            let (box_judged, mask_judged) = (
+                judge(shape, &truth, by_box.fit.as_ref()),
+                judge(shape, &truth, by_mask.fit.as_ref()),
             );
-            let agree = match (&box_fit, &mask_fit) {
+            let agree = match (&by_box.fit, &by_mask.fit) {
                 (Some(b), Some(m)) => {
                     b.model.kind == m.model.kind
                         && relative_chamfer((&m.fitted.0, &m.fitted.1), (&b.fitted.0, &b.fitted.1))
@@ -112,15 +115,15 @@ pub fn run(
                 holed: shape.a4 > 0.0,
                 visible_pixels: visible,
                 in_frame: silhouette_in_frame(shape, pose, &frame.scene.camera)?,
-                table_found,
-                box_refused,
-                box_right: by_box.right(),
-                box_chamfer: by_box.chamfer,
-                mask_right: by_mask.right(),
-                mask_chamfer: by_mask.chamfer,
+                table_found: by_box.table_found,
+                box_refused: by_box.refused,
+                box_right: box_judged.right(),
+                box_chamfer: box_judged.chamfer,
+                mask_right: mask_judged.right(),
+                mask_chamfer: mask_judged.chamfer,
                 agree,
-                box_ms,
-                mask_ms,
+                box_ms: by_box.ms,
+                mask_ms: by_mask.ms,
             });
         }
         bar.inc(1);
@@ -143,35 +146,46 @@ pub fn detector_box(mask: &[bool], width: u32) -> Roi {
     widened_box(&pixels, BOX_PAD).expect("an object in view has pixels")
 }
 
-/// The box's pixels fitted as `/v1/fit/depth` fits a box without a mask: the fit (none
-/// where the box held nothing but a table, or the fit failed), whether a table was
-/// found, whether the box was refused, and the time.
-fn fit_box(
+/// An object fitted from the pixels of its box or its mask.
+struct DepthFit {
+    /// none where the box held nothing but a table, or the fit failed
+    fit: Option<FitReport>,
+    table_found: bool,
+    /// the box held a table and nothing on it (`no_object_found`)
+    refused: bool,
+    /// the table's removal and the fit
+    ms: f64,
+}
+
+/// `pixels` (read from `image` as its options say) fitted as `/v1/fit/depth` fits them
+/// ([`depth_object`], [`depth_options`]).
+fn fit_depth_object(
     evaluator: &mut dyn Evaluator,
     pixels: Pixels,
+    (image, read): (&DepthImage, &DepthOptions),
+    selection: Selection,
     options: &FitOptions,
-) -> Result<(Option<FitReport>, bool, bool, f64), String> {
+) -> DepthFit {
     let start = Instant::now();
     let field = pixels.field_of_view;
-    let (points, table) = match remove_table(&pixels, options.seed) {
-        TableOutcome::NoTable => (pixels.points, None),
-        TableOutcome::Removed { plane, object, .. } => (object, Some(plane)),
-        TableOutcome::NothingOnIt { .. } => {
-            return Ok((None, true, true, start.elapsed().as_secs_f64() * 1e3));
-        }
-    };
-    let fitted = fit(
-        evaluator,
-        &points,
-        &depth_options(options, table.as_ref(), field),
-    )
-    .ok();
-    Ok((
-        fitted,
-        table.is_some(),
-        false,
-        start.elapsed().as_secs_f64() * 1e3,
-    ))
+    let (fit, table_found, refused) =
+        match depth_object(pixels, image, read, selection, options.seed) {
+            Err(_) => (None, true, true),
+            Ok(DepthObject { points, table }) => {
+                let fitted = fit(
+                    evaluator,
+                    &points,
+                    &depth_options(options, table.as_ref(), field),
+                );
+                (fitted.ok(), table.is_some(), false)
+            }
+        };
+    DepthFit {
+        fit,
+        table_found,
+        refused,
+        ms: start.elapsed().as_secs_f64() * 1e3,
+    }
 }
 
 fn share(n: usize, d: usize) -> f64 {

@@ -113,6 +113,50 @@ pub fn remove_table(pixels: &Pixels, seed: u64) -> TableOutcome {
     TableOutcome::NoTable
 }
 
+/// How a depth frame's object was picked out of it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Selection {
+    /// a detector's box and no mask: the table around the object is in it
+    DetectorBox,
+    /// a segmenter's mask: the object's pixels alone
+    Mask,
+    /// neither (the whole frame, or a box the caller says holds the object alone)
+    Pixels,
+}
+
+/// A depth frame's object points and the table it rests on, where one was found.
+pub struct DepthObject {
+    pub points: Vec<DVec3>,
+    pub table: Option<Plane>,
+}
+
+/// The object in the pixels read (`selected`, read from `image` by `read`), as
+/// `/v1/fit/depth` takes it: from a detector's box, the table taken away
+/// ([`remove_table`]); from a mask, the table found around it ([`table_beside`]);
+/// otherwise the pixels as they are. Err: the box holds a table and nothing on it (the
+/// points left off the table).
+pub fn depth_object(
+    selected: Pixels,
+    image: &DepthImage,
+    read: &DepthOptions,
+    selection: Selection,
+    seed: u64,
+) -> Result<DepthObject, usize> {
+    let (points, table) = match selection {
+        Selection::DetectorBox => match remove_table(&selected, seed) {
+            TableOutcome::NoTable => (selected.points, None),
+            TableOutcome::Removed { plane, object, .. } => (object, Some(plane)),
+            TableOutcome::NothingOnIt { left, .. } => return Err(left),
+        },
+        Selection::Mask => {
+            let table = table_beside(image, read, &selected, seed);
+            (selected.points, table)
+        }
+        Selection::Pixels => (selected.points, None),
+    };
+    Ok(DepthObject { points, table })
+}
+
 /// How much wider than a masked object's pixels the box is that its table is looked for
 /// in ([`table_beside`]), on each side, as a share of the box's width (and height): as
 /// loose as a detector's box.

@@ -808,36 +808,28 @@ fn depth_points(
     let (selected, image, has_mask) = frame.back_project(state, depth, mask)?;
     let field_of_view = selected.field_of_view;
     let intrinsics = params.intrinsics.expect("checked by back_project");
-    let seed = params.options.seed.unwrap_or(0);
     let mut notes: Vec<String> = Vec::new();
-    let mut table = None;
     // a box without a mask holds the table around the object: take it away; a mask's
     // object has its table around the mask
-    let points = if params.roi.is_some() && !has_mask {
-        use crate::scene::table::{TableOutcome, remove_table};
-        match remove_table(&selected, seed) {
-            TableOutcome::NoTable => selected.points,
-            TableOutcome::Removed { plane, object, .. } => {
-                table = Some(plane);
-                object
-            }
-            TableOutcome::NothingOnIt { left, .. } => {
-                return Err(ApiError::unprocessable(
+    use crate::scene::table::{DepthObject, Selection, depth_object};
+    let selection = match (params.roi, has_mask) {
+        (_, true) => Selection::Mask,
+        (Some(_), false) => Selection::DetectorBox,
+        (None, false) => Selection::Pixels,
+    };
+    let pixels_read = selected.points.len();
+    let seed = params.options.seed.unwrap_or(0);
+    let DepthObject { points, table } =
+        depth_object(selected, &image, &frame.depth_options()?, selection, seed).map_err(
+            |left| {
+                ApiError::unprocessable(
                     "no_object_found",
                     format!(
-                        "the box holds a plane (a table) and nothing on it: {left} of {} points are off the plane",
-                        selected.points.len()
+                        "the box holds a plane (a table) and nothing on it: {left} of {pixels_read} points are off the plane"
                     ),
-                ));
-            }
-        }
-    } else {
-        if has_mask {
-            let read = frame.depth_options()?;
-            table = crate::scene::table::table_beside(&image, &read, &selected, seed);
-        }
-        selected.points
-    };
+                )
+            },
+        )?;
     let pixels = image.width as f64 * image.height as f64;
     if params.roi.is_none() && !has_mask && points.len() as f64 > WHOLE_FRAME_SHARE * pixels {
         return Err(ApiError::unprocessable(
