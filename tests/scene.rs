@@ -101,6 +101,7 @@ fn a_box_around_an_object_on_a_table_keeps_the_object_and_a_bare_box_keeps_nothi
         plane,
         object,
         table_points,
+        ..
     } = remove_table(&pixels, 0)
     else {
         panic!("no table found");
@@ -765,6 +766,80 @@ fn a_detectors_box_gives_the_fit_its_mask_gives() {
         "{e:?}: box {:?} mask {:?}",
         boxed.0,
         masked.0
+    );
+}
+
+/// `/v1/fit/depth` warns an object the image's edge cuts, as a scene does, and not one
+/// wholly in the image (`bench scenes` frame 830008: a box half out of the left edge).
+#[test]
+fn the_depth_route_warns_an_object_the_images_edge_cuts() {
+    use base64::Engine;
+    use serde_json::{Value, json};
+    use supertoroid::bench::scenes::BenchFrame;
+    use supertoroid::synth::scene::FIRST_OBJECT;
+    let server = common::Server::start(supertoroid::service::ServiceConfig {
+        backend: supertoroid::eval::Backend::Cpu,
+        ..Default::default()
+    });
+    let frame = BenchFrame::new(830_008).unwrap();
+    let width = frame.depth.width;
+    let mask_of = |i: usize| {
+        let label = FIRST_OBJECT + i as u16;
+        supertoroid::synth::DepthImage {
+            data: frame
+                .rendered
+                .labels
+                .iter()
+                .map(|&l| u16::from(l == label))
+                .collect(),
+            ..frame.depth.clone()
+        }
+    };
+    // the object with the most pixels on the image's left or right edge, and one with none
+    let on_edge = |i: usize| {
+        let m = mask_of(i);
+        (0..m.data.len())
+            .filter(|&p| m.data[p] == 1 && [0, width - 1].contains(&(p as u32 % width)))
+            .count()
+    };
+    let objects = frame.scene.objects.len();
+    let cut = (0..objects).max_by_key(|&i| on_edge(i)).unwrap();
+    let whole = (0..objects)
+        .filter(|&i| on_edge(i) == 0)
+        .max_by_key(|&i| mask_of(i).data.iter().filter(|&&m| m == 1).count())
+        .unwrap();
+    assert!(on_edge(cut) > 50, "{}", on_edge(cut));
+    let b64 = |d: &supertoroid::synth::DepthImage| {
+        base64::engine::general_purpose::STANDARD
+            .encode(supertoroid::io::depth::encode_depth_png(d))
+    };
+    let k = frame.depth_options.intrinsics;
+    let c = common::client();
+    let warnings = |i: usize| {
+        let body = json!({
+            "depth_png": b64(&frame.depth), "depth_scale": frame.depth_options.depth_scale,
+            "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
+            "mask_png": b64(&mask_of(i)),
+            "options": {"seed": 1, "model": "auto"}
+        });
+        let r = c
+            .post(server.url("/v1/fit/depth"))
+            .json(&body)
+            .send()
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 200);
+        let v: Value = r.json().unwrap();
+        v["warnings"].to_string()
+    };
+    assert!(
+        warnings(cut).contains("cut by the frame's edge"),
+        "{}",
+        warnings(cut)
+    );
+    assert!(
+        !warnings(whole).contains("cut by the frame's edge"),
+        "{}",
+        warnings(whole)
     );
 }
 

@@ -11,8 +11,9 @@ use super::{Report, percentile};
 use crate::eval::{Backend, Evaluator, make_evaluator};
 use crate::fit::{FitOptions, FitReport, fit};
 use crate::io::depth::{DepthOptions, Roi, back_project_pixels};
-use crate::scene::fit::depth_options;
+use crate::scene::fit::{depth_options, edge_warning};
 use crate::scene::objects::SceneOptions;
+use crate::scene::objects::pixels_on_edge;
 use crate::scene::table::{DepthObject, Pixels, Selection, depth_object, widened_box};
 use crate::suite::chamfer::{CHAMFER_BOUND, relative_chamfer};
 use crate::synth::DepthImage;
@@ -42,6 +43,9 @@ pub struct BoxCase {
     /// the box's and the mask's fits have the same model and surfaces within
     /// [`CHAMFER_BOUND`] of each other
     pub agree: bool,
+    /// each fit warned `cut by the frame's edge` (the edge of the image or of the box)
+    pub box_edge_warned: bool,
+    pub mask_edge_warned: bool,
     pub box_ms: f64,
     pub mask_ms: f64,
 }
@@ -122,6 +126,8 @@ pub fn run(
                 mask_right: mask_judged.right(),
                 mask_chamfer: mask_judged.chamfer,
                 agree,
+                box_edge_warned: by_box.edge_warned,
+                mask_edge_warned: by_mask.edge_warned,
                 box_ms: by_box.ms,
                 mask_ms: by_mask.ms,
             });
@@ -153,6 +159,8 @@ struct DepthFit {
     table_found: bool,
     /// the box held a table and nothing on it (`no_object_found`)
     refused: bool,
+    /// warned `cut by the frame's edge` (as `/v1/fit/depth` warns it)
+    edge_warned: bool,
     /// the table's removal and the fit
     ms: f64,
 }
@@ -167,23 +175,29 @@ fn fit_depth_object(
     options: &FitOptions,
 ) -> DepthFit {
     let start = Instant::now();
-    let field = pixels.field_of_view;
-    let (fit, table_found, refused) =
+    let (field, window) = (pixels.field_of_view, pixels.window);
+    let (fit, table_found, refused, edge_warned) =
         match depth_object(pixels, image, read, selection, options.seed) {
-            Err(_) => (None, true, true),
-            Ok(DepthObject { points, table }) => {
+            Err(_) => (None, true, true, false),
+            Ok(DepthObject {
+                points,
+                pixels,
+                table,
+            }) => {
                 let fitted = fit(
                     evaluator,
                     &points,
                     &depth_options(options, table.as_ref(), field),
                 );
-                (fitted.ok(), table.is_some(), false)
+                let warned = edge_warning(pixels_on_edge(&pixels, window), pixels.len());
+                (fitted.ok(), table.is_some(), false, warned.is_some())
             }
         };
     DepthFit {
         fit,
         table_found,
         refused,
+        edge_warned,
         ms: start.elapsed().as_secs_f64() * 1e3,
     }
 }
@@ -199,11 +213,11 @@ impl Report for BoxesReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "frame,object,holed,visible_pixels,in_frame,table_found,box_refused,box_right,box_chamfer,mask_right,mask_chamfer,agree,box_ms,mask_ms\n",
+            "frame,object,holed,visible_pixels,in_frame,table_found,box_refused,box_right,box_chamfer,mask_right,mask_chamfer,agree,box_edge_warned,mask_edge_warned,box_ms,mask_ms\n",
         );
         for o in &self.objects {
             s += &format!(
-                "{},{},{},{},{:.3},{},{},{},{:.5},{},{:.5},{},{:.1},{:.1}\n",
+                "{},{},{},{},{:.3},{},{},{},{:.5},{},{:.5},{},{},{},{:.1},{:.1}\n",
                 o.frame,
                 o.object,
                 o.holed,
@@ -216,6 +230,8 @@ impl Report for BoxesReport {
                 o.mask_right,
                 o.mask_chamfer,
                 o.agree,
+                o.box_edge_warned,
+                o.mask_edge_warned,
                 o.box_ms,
                 o.mask_ms
             );
@@ -262,6 +278,19 @@ impl Report for BoxesReport {
             let kept: Vec<&BoxCase> = all.iter().copied().filter(|o| keep(o)).collect();
             md += &row(label, &kept);
         }
+        let cut = |o: &&BoxCase| o.in_frame < WHOLLY_IN_FRAME;
+        let warned = |f: fn(&BoxCase) -> bool, keep: &dyn Fn(&&BoxCase) -> bool| {
+            self.objects.iter().filter(keep).filter(|o| f(o)).count()
+        };
+        md += &format!(
+            "\nWarned `cut by the frame's edge`: from the box {} of the {} objects cut by the frame's edge and {} of the {} wholly in it; from the mask {} and {}.\n",
+            warned(|o| o.box_edge_warned, &cut),
+            self.objects.iter().filter(cut).count(),
+            warned(|o| o.box_edge_warned, &|o| !cut(o)),
+            self.objects.iter().filter(|o| !cut(o)).count(),
+            warned(|o| o.mask_edge_warned, &cut),
+            warned(|o| o.mask_edge_warned, &|o| !cut(o)),
+        );
         if !self.objects.is_empty() {
             let times = |f: fn(&BoxCase) -> f64| self.objects.iter().map(f).collect::<Vec<_>>();
             md += &format!(

@@ -259,8 +259,9 @@ pub fn assemble(
     }
 }
 
-/// The warning of an object the frame's edge cuts ([`MIN_EDGE_CHORD`]).
-fn edge_warning(edge_pixels: usize, pixels: usize) -> Option<String> {
+/// The warning of an object the frame's edge cuts ([`MIN_EDGE_CHORD`]): `edge_pixels` of
+/// its `pixels` lie on the edge of the pixels read.
+pub fn edge_warning(edge_pixels: usize, pixels: usize) -> Option<String> {
     (edge_pixels as f64 >= MIN_EDGE_CHORD * (pixels as f64).sqrt()).then(|| {
         format!(
             "cut by the frame's edge: {edge_pixels} of its {pixels} pixels lie on it, so \

@@ -82,13 +82,18 @@ impl Segment {
     /// How many of its pixels lie on the edge of `window` ([x, y, width, height]): an
     /// object the frame's edge cuts shows a run of them, one wholly in the frame none.
     pub fn edge_pixels(&self, window: [u32; 4]) -> usize {
-        let [x, y, w, h] = window;
-        let (right, bottom) = ((x + w).saturating_sub(1), (y + h).saturating_sub(1));
-        self.pixels
-            .iter()
-            .filter(|&&(u, v)| u <= x || v <= y || u >= right || v >= bottom)
-            .count()
+        pixels_on_edge(&self.pixels, window)
     }
+}
+
+/// How many of `pixels` lie on the edge of the pixel rectangle `window` [x, y, w, h].
+pub fn pixels_on_edge(pixels: &[(u32, u32)], window: [u32; 4]) -> usize {
+    let [x, y, w, h] = window;
+    let (right, bottom) = ((x + w).saturating_sub(1), (y + h).saturating_sub(1));
+    pixels
+        .iter()
+        .filter(|&&(u, v)| u <= x || v <= y || u >= right || v >= bottom)
+        .count()
 }
 
 /// A frame split into its table and the objects on it.

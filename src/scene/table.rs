@@ -51,6 +51,8 @@ pub enum TableOutcome {
         plane: Plane,
         table_points: usize,
         object: Vec<DVec3>,
+        /// the object's pixels, in the order of its points
+        object_pixels: Vec<(u32, u32)>,
     },
     /// nothing but the table (and specks) in the box
     NothingOnIt { plane: Plane, left: usize },
@@ -97,17 +99,18 @@ pub fn remove_table(pixels: &Pixels, seed: u64) -> TableOutcome {
             left.retain(|&i| !inliers[i]);
             continue;
         }
-        let object = largest_region(pixels, &above);
-        if object.len() < enough {
+        let region = largest_region(pixels, &above);
+        if region.len() < enough {
             return TableOutcome::NothingOnIt {
                 plane,
-                left: object.len(),
+                left: region.len(),
             };
         }
         return TableOutcome::Removed {
             plane,
             table_points: inlier_count,
-            object,
+            object: region.iter().map(|&i| pixels.points[i]).collect(),
+            object_pixels: region.iter().map(|&i| pixels.pixels[i]).collect(),
         };
     }
     TableOutcome::NoTable
@@ -124,9 +127,11 @@ pub enum Selection {
     Pixels,
 }
 
-/// A depth frame's object points and the table it rests on, where one was found.
+/// A depth frame's object points, their pixels, and the table it rests on, where one
+/// was found.
 pub struct DepthObject {
     pub points: Vec<DVec3>,
+    pub pixels: Vec<(u32, u32)>,
     pub table: Option<Plane>,
 }
 
@@ -142,19 +147,31 @@ pub fn depth_object(
     selection: Selection,
     seed: u64,
 ) -> Result<DepthObject, usize> {
-    let (points, table) = match selection {
+    let table = match selection {
         Selection::DetectorBox => match remove_table(&selected, seed) {
-            TableOutcome::NoTable => (selected.points, None),
-            TableOutcome::Removed { plane, object, .. } => (object, Some(plane)),
+            TableOutcome::NoTable => None,
+            TableOutcome::Removed {
+                plane,
+                object,
+                object_pixels,
+                ..
+            } => {
+                return Ok(DepthObject {
+                    points: object,
+                    pixels: object_pixels,
+                    table: Some(plane),
+                });
+            }
             TableOutcome::NothingOnIt { left, .. } => return Err(left),
         },
-        Selection::Mask => {
-            let table = table_beside(image, read, &selected, seed);
-            (selected.points, table)
-        }
-        Selection::Pixels => (selected.points, None),
+        Selection::Mask => table_beside(image, read, &selected, seed),
+        Selection::Pixels => None,
     };
-    Ok(DepthObject { points, table })
+    Ok(DepthObject {
+        points: selected.points,
+        pixels: selected.pixels,
+        table,
+    })
 }
 
 /// How much wider than a masked object's pixels the box is that its table is looked for
@@ -207,7 +224,7 @@ pub fn widened_box(pixels: &[(u32, u32)], pad: f64) -> Option<Roi> {
 
 /// The points of the largest 8-connected region of kept pixels, neighbours joined where
 /// their depths differ by less than [`DEPTH_JUMP`].
-fn largest_region(pixels: &Pixels, keep: &[bool]) -> Vec<DVec3> {
+fn largest_region(pixels: &Pixels, keep: &[bool]) -> Vec<usize> {
     let (u0, v0) = pixels
         .pixels
         .iter()
@@ -268,5 +285,5 @@ fn largest_region(pixels: &Pixels, keep: &[bool]) -> Vec<DVec3> {
         }
     }
     best.sort_unstable();
-    best.into_iter().map(|i| pixels.points[i]).collect()
+    best
 }

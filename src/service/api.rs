@@ -817,9 +817,13 @@ fn depth_points(
         (Some(_), false) => Selection::DetectorBox,
         (None, false) => Selection::Pixels,
     };
-    let pixels_read = selected.points.len();
+    let (pixels_read, window) = (selected.points.len(), selected.window);
     let seed = params.options.seed.unwrap_or(0);
-    let DepthObject { points, table } =
+    let DepthObject {
+        points,
+        pixels: object_pixels,
+        table,
+    } =
         depth_object(selected, &image, &frame.depth_options()?, selection, seed).map_err(
             |left| {
                 ApiError::unprocessable(
@@ -830,6 +834,11 @@ fn depth_points(
                 )
             },
         )?;
+    // an object the edge of the image (or of the box read) cuts is warned, as a scene's is
+    notes.extend(crate::scene::fit::edge_warning(
+        crate::scene::objects::pixels_on_edge(&object_pixels, window),
+        object_pixels.len(),
+    ));
     let pixels = image.width as f64 * image.height as f64;
     if params.roi.is_none() && !has_mask && points.len() as f64 > WHOLE_FRAME_SHARE * pixels {
         return Err(ApiError::unprocessable(
