@@ -92,6 +92,13 @@ fn options(camera: &Camera, roi: Roi) -> DepthOptions {
     }
 }
 
+/// A depth image (or a mask) as a request carries it: a 16-bit PNG in base64.
+fn png_base64(image: &synth::DepthImage) -> String {
+    use base64::Engine;
+    base64::engine::general_purpose::STANDARD
+        .encode(supertoroid::io::depth::encode_depth_png(image))
+}
+
 #[test]
 fn a_box_around_an_object_on_a_table_keeps_the_object_and_a_bare_box_keeps_nothing() {
     let shape = Shape::new(0.02, 0.02, 0.012, 2.2, 0.8, 1.0);
@@ -182,7 +189,6 @@ fn a_box_whose_object_face_outweighs_the_table_finds_the_table_behind_it() {
 
 #[test]
 fn the_depth_route_with_only_a_box_fits_the_object_and_refuses_a_bare_table() {
-    use base64::Engine;
     use serde_json::{Value, json};
     let server = common::Server::start(supertoroid::service::ServiceConfig {
         backend: supertoroid::eval::Backend::Cpu,
@@ -190,8 +196,7 @@ fn the_depth_route_with_only_a_box_fits_the_object_and_refuses_a_bare_table() {
     });
     let shape = Shape::new(0.02, 0.02, 0.012, 2.2, 0.8, 1.0);
     let (depth, camera, roi, pose) = table_frame(shape, DVec3::ZERO);
-    let png = base64::engine::general_purpose::STANDARD
-        .encode(supertoroid::io::depth::encode_depth_png(&depth));
+    let png = png_base64(&depth);
     let k = camera.intrinsics;
     let body = |roi: Roi| {
         json!({
@@ -480,7 +485,6 @@ fn scene_frame(seed: u64, objects: usize) -> (synth::DepthImage, Camera) {
 
 #[test]
 fn the_scene_route_answers_the_table_and_its_objects_and_refuses_what_is_no_scene() {
-    use base64::Engine;
     use serde_json::{Value, json};
     let server = common::Server::start(supertoroid::service::ServiceConfig {
         backend: supertoroid::eval::Backend::Cpu,
@@ -489,13 +493,9 @@ fn the_scene_route_answers_the_table_and_its_objects_and_refuses_what_is_no_scen
     let c = common::client();
     let (depth, camera) = scene_frame(700_010, 3);
     let k = camera.intrinsics;
-    let png = |d: &synth::DepthImage| {
-        base64::engine::general_purpose::STANDARD
-            .encode(supertoroid::io::depth::encode_depth_png(d))
-    };
     let body = |d: &synth::DepthImage, scene: Value| {
         json!({
-            "depth_png": png(d),
+            "depth_png": png_base64(d),
             "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
             "scene": scene,
             "options": {"seed": 1, "time_budget_ms": 500,
@@ -709,7 +709,6 @@ fn the_scene_command_prints_the_objects_that_export_reads_and_refuses_a_bare_tab
 /// the table found around the mask.
 #[test]
 fn a_detectors_box_gives_the_fit_its_mask_gives() {
-    use base64::Engine;
     use serde_json::{Value, json};
     let server = common::Server::start(supertoroid::service::ServiceConfig {
         backend: supertoroid::eval::Backend::Cpu,
@@ -725,13 +724,9 @@ fn a_detectors_box_gives_the_fit_its_mask_gives() {
     for [u, v] in &view.pixels {
         mask.data[(v * mask.width + u) as usize] = 1;
     }
-    let b64 = |d: &synth::DepthImage| {
-        base64::engine::general_purpose::STANDARD
-            .encode(supertoroid::io::depth::encode_depth_png(d))
-    };
     let k = camera.intrinsics;
     let body = json!({
-        "depth_png": b64(&depth), "depth_scale": 0.0001,
+        "depth_png": png_base64(&depth), "depth_scale": 0.0001,
         "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
         "options": {"seed": 2}
     });
@@ -754,7 +749,7 @@ fn a_detectors_box_gives_the_fit_its_mask_gives() {
         "roi",
         json!({"x": roi.x, "y": roi.y, "width": roi.width, "height": roi.height}),
     );
-    let (masked, mask_table) = fit_with("mask_png", json!(b64(&mask)));
+    let (masked, mask_table) = fit_with("mask_png", json!(png_base64(&mask)));
     // both find the table (the mask's around it), and both fits rest on it
     let up = camera.pose.rotation.inverse() * DVec3::Z;
     for table in [box_table, mask_table] {
@@ -773,7 +768,6 @@ fn a_detectors_box_gives_the_fit_its_mask_gives() {
 /// wholly in the image (`bench scenes` frame 830008: a box half out of the left edge).
 #[test]
 fn the_depth_route_warns_an_object_the_images_edge_cuts() {
-    use base64::Engine;
     use serde_json::{Value, json};
     use supertoroid::bench::scenes::BenchFrame;
     use supertoroid::synth::scene::FIRST_OBJECT;
@@ -809,17 +803,13 @@ fn the_depth_route_warns_an_object_the_images_edge_cuts() {
         .max_by_key(|&i| mask_of(i).data.iter().filter(|&&m| m == 1).count())
         .unwrap();
     assert!(on_edge(cut) > 50, "{}", on_edge(cut));
-    let b64 = |d: &supertoroid::synth::DepthImage| {
-        base64::engine::general_purpose::STANDARD
-            .encode(supertoroid::io::depth::encode_depth_png(d))
-    };
     let k = frame.depth_options.intrinsics;
     let c = common::client();
     let warnings = |i: usize| {
         let body = json!({
-            "depth_png": b64(&frame.depth), "depth_scale": frame.depth_options.depth_scale,
+            "depth_png": png_base64(&frame.depth), "depth_scale": frame.depth_options.depth_scale,
             "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
-            "mask_png": b64(&mask_of(i)),
+            "mask_png": png_base64(&mask_of(i)),
             "options": {"seed": 1, "model": "auto"}
         });
         let r = c
