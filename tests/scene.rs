@@ -92,6 +92,17 @@ fn options(camera: &Camera, roi: Roi) -> DepthOptions {
     }
 }
 
+/// `body` posted to `/v1/fit/depth`, answered 200: the answer's JSON.
+fn fitted_from_depth(server: &common::Server, body: &serde_json::Value) -> serde_json::Value {
+    let r = common::client()
+        .post(server.url("/v1/fit/depth"))
+        .json(body)
+        .send()
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 200);
+    r.json().unwrap()
+}
+
 /// A depth image (or a mask) as a request carries it: a 16-bit PNG in base64.
 fn png_base64(image: &synth::DepthImage) -> String {
     use base64::Engine;
@@ -207,13 +218,7 @@ fn the_depth_route_with_only_a_box_fits_the_object_and_refuses_a_bare_table() {
         })
     };
     let c = common::client();
-    let r = c
-        .post(server.url("/v1/fit/depth"))
-        .json(&body(roi))
-        .send()
-        .unwrap();
-    assert_eq!(r.status().as_u16(), 200);
-    let fit: Value = r.json().unwrap();
+    let fit = fitted_from_depth(&server, &body(roi));
     let object: supertoroid::model::FittedObject = serde_json::from_value(fit.clone()).unwrap();
     let (fitted, in_camera) = object.validated().unwrap();
     let in_world = Pose::new(
@@ -730,17 +735,10 @@ fn a_detectors_box_gives_the_fit_its_mask_gives() {
         "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
         "options": {"seed": 2}
     });
-    let c = common::client();
     let fit_with = |key: &str, value: Value| {
         let mut body = body.clone();
         body[key] = value;
-        let r = c
-            .post(server.url("/v1/fit/depth"))
-            .json(&body)
-            .send()
-            .unwrap();
-        assert_eq!(r.status().as_u16(), 200);
-        let v: Value = r.json().unwrap();
+        let v = fitted_from_depth(&server, &body);
         let table: Plane = serde_json::from_value(v["table"].clone()).unwrap();
         let object: supertoroid::model::FittedObject = serde_json::from_value(v).unwrap();
         (object.validated().unwrap(), table)
@@ -768,7 +766,7 @@ fn a_detectors_box_gives_the_fit_its_mask_gives() {
 /// wholly in the image (`bench scenes` frame 830008: a box half out of the left edge).
 #[test]
 fn the_depth_route_warns_an_object_the_images_edge_cuts() {
-    use serde_json::{Value, json};
+    use serde_json::json;
     use supertoroid::bench::scenes::BenchFrame;
     use supertoroid::synth::scene::FIRST_OBJECT;
     let server = common::Server::start(supertoroid::service::ServiceConfig {
@@ -804,7 +802,6 @@ fn the_depth_route_warns_an_object_the_images_edge_cuts() {
         .unwrap();
     assert!(on_edge(cut) > 50, "{}", on_edge(cut));
     let k = frame.depth_options.intrinsics;
-    let c = common::client();
     let warnings = |i: usize| {
         let body = json!({
             "depth_png": png_base64(&frame.depth), "depth_scale": frame.depth_options.depth_scale,
@@ -812,14 +809,7 @@ fn the_depth_route_warns_an_object_the_images_edge_cuts() {
             "mask_png": png_base64(&mask_of(i)),
             "options": {"seed": 1, "model": "auto"}
         });
-        let r = c
-            .post(server.url("/v1/fit/depth"))
-            .json(&body)
-            .send()
-            .unwrap();
-        assert_eq!(r.status().as_u16(), 200);
-        let v: Value = r.json().unwrap();
-        v["warnings"].to_string()
+        fitted_from_depth(&server, &body)["warnings"].to_string()
     };
     assert!(
         warnings(cut).contains("cut by the frame's edge"),
