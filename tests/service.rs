@@ -307,6 +307,14 @@ fn a_depth_frame_as_json_and_as_multipart_fits_the_object() {
     let e =
         supertoroid::suite::ground_truth::compare((&shape, &pose), (&fitted_shape, &fitted_pose));
     assert!(e.success(), "{e:?}");
+    // a depth frame is fitted both ways unless the request names a model; the ring keeps
+    // its hole
+    assert_eq!(
+        from_json["model"]["chosen_by"], "bic",
+        "{}",
+        from_json["model"]
+    );
+    assert_eq!(from_json["model"]["kind"], "supertoroid");
 
     // raw u16 with a mask part: only the masked half is fitted
     let image =

@@ -68,7 +68,8 @@ pub struct FitRequestOptions {
     /// procedure, a baseline)
     pub method: Option<crate::fit::Method>,
     /// model: supertoroid (a4 free), superellipsoid (a4 = 0) or auto (both fitted, the
-    /// lower BIC chosen; `model` in the answer gives both)
+    /// lower BIC chosen; `model` in the answer gives both); default supertoroid, auto for
+    /// depth frames (`/v1/fit/depth`, `/v1/scene`)
     pub model: Option<crate::fit::Model>,
     /// input format for raw bodies: xyz, pcd, ply, raw (default: sniffed)
     pub format: Option<Format>,
@@ -580,7 +581,11 @@ async fn fit_depth(
         table,
         field_of_view,
     } = depth_points(&state, &params, depth_bytes, mask_bytes)?;
-    let mut job = params.options.job(points)?;
+    // (a depth frame is of things on a table, most without a hole: both models unless the
+    // request names one, as `/v1/scene` does)
+    let mut request_options = params.options.clone();
+    request_options.model = Some(request_options.model.unwrap_or(crate::fit::Model::Auto));
+    let mut job = request_options.job(points)?;
     // seen from the camera, within the image (or the box); resting on the table a box held
     job.options = crate::scene::fit::depth_options(&job.options, table.as_ref(), field_of_view);
     let mut fit = fit_one(&state, job).await?;
