@@ -13,39 +13,44 @@ use supertoroid::synth::{self, Camera, Intrinsics};
 
 mod common;
 
+/// At 1,000 points and at 100,000 (a depth box's worth: the samples are scored on a
+/// stride, the plane refined and counted on every point).
 #[test]
 fn the_plane_fit_finds_a_noisy_plane_among_outliers() {
-    let mut rng = synth::rng(3);
-    let truth = Plane::through(DVec3::new(0.0, 0.0, 0.8), DVec3::new(0.1, -0.6, -1.0));
-    let n = truth.normal();
-    let (e1, e2) = n.any_orthonormal_pair();
-    let mut points: Vec<DVec3> = (0..700)
-        .map(|_| {
-            DVec3::new(0.0, 0.0, 0.8)
-                + e1 * rng.random_range(-0.3..0.3)
-                + e2 * rng.random_range(-0.3..0.3)
-                + n * rng.random_range(-0.001..0.001)
-        })
-        .collect();
-    points.extend((0..300).map(|_| {
-        DVec3::new(
-            rng.random_range(-0.3..0.3),
-            rng.random_range(-0.3..0.3),
-            rng.random_range(0.5..1.1),
-        )
-    }));
-    let fit = fit_plane(&points, 0.003, 1).unwrap();
-    assert!(
-        fit.plane.normal().dot(n).abs() > (1.0f64).to_radians().cos(),
-        "{:?}",
-        fit.plane
-    );
-    assert!(
-        fit.inlier_count >= 700 && fit.inlier_count < 760,
-        "{}",
-        fit.inlier_count
-    );
-    assert!(fit_plane(&points[..2], 0.003, 1).is_none());
+    for scale in [1, 100] {
+        let mut rng = synth::rng(3);
+        let truth = Plane::through(DVec3::new(0.0, 0.0, 0.8), DVec3::new(0.1, -0.6, -1.0));
+        let n = truth.normal();
+        let (e1, e2) = n.any_orthonormal_pair();
+        let mut points: Vec<DVec3> = (0..700 * scale)
+            .map(|_| {
+                DVec3::new(0.0, 0.0, 0.8)
+                    + e1 * rng.random_range(-0.3..0.3)
+                    + e2 * rng.random_range(-0.3..0.3)
+                    + n * rng.random_range(-0.001..0.001)
+            })
+            .collect();
+        points.extend((0..300 * scale).map(|_| {
+            DVec3::new(
+                rng.random_range(-0.3..0.3),
+                rng.random_range(-0.3..0.3),
+                rng.random_range(0.5..1.1),
+            )
+        }));
+        let fit = fit_plane(&points, 0.003, 1).unwrap();
+        assert!(
+            fit.plane.normal().dot(n).abs() > (1.0f64).to_radians().cos(),
+            "{:?}",
+            fit.plane
+        );
+        assert!(
+            fit.inlier_count >= 700 * scale && fit.inlier_count < 760 * scale,
+            "{}",
+            fit.inlier_count
+        );
+        assert_eq!(fit.inliers.len(), points.len());
+        assert!(fit_plane(&points[..2], 0.003, 1).is_none());
+    }
 }
 
 /// A ring lying on the table z = 0 (world), seen by a camera above and in front, the
