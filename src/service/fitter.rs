@@ -3,7 +3,8 @@
 //! A request first takes an admission permit (workers + queue depth of them): when none
 //! is left the queue is full and the answer is 503 at once, so memory stays bounded
 //! whatever the load. It then waits for one of `workers` worker permits and runs on
-//! tokio's blocking pool. Both permits travel into the blocking task, so a fit that
+//! tokio's blocking pool: on every core (rayon's pool) when no other fit is running, else
+//! on its own one. Both permits travel into the blocking task, so a fit that
 //! outlives its request's timeout still counts until it really ends.
 //!
 //! One GPU context serves every request (pipelines compiled once); each fit gets its own
@@ -161,7 +162,10 @@ impl Fitter {
             drop(waiting);
             let worker = worker.map_err(|_| ApiError::overloaded())?;
             let degraded = self.degraded.clone();
-            let serial = self.worker_count > 1;
+            // a fit alone takes every core (a robot cell posts one frame and waits for
+            // it); beside others, one each
+            let alone = self.workers.available_permits() + 1 >= self.worker_count;
+            let serial = !alone;
             tokio::task::spawn_blocking(move || {
                 let _permits = (admission, worker);
                 run_jobs(jobs, gpu.as_ref(), &degraded, serial)
@@ -203,9 +207,9 @@ impl Drop for Waiting<'_> {
 }
 
 thread_local! {
-    /// A one-thread rayon pool per fit worker: with `workers` fits in parallel, the CPU
-    /// evaluator's own parallelism would only oversubscribe the cores and lengthen the
-    /// tail latency.
+    /// A one-thread rayon pool per fit worker, for a fit that starts while others run:
+    /// with `workers` fits in parallel, the CPU evaluator's own parallelism would only
+    /// oversubscribe the cores and lengthen the tail latency.
     static SERIAL: Option<rayon::ThreadPool> =
         rayon::ThreadPoolBuilder::new().num_threads(1).build().ok();
 }
