@@ -184,6 +184,7 @@ fn searched_once(
     groups.sort_by_key(|g| g[0].1.known[3].is_some());
     let model_twins = model_twins(clouds);
     let mut by_likelihood = vec![false; clouds.len()];
+    let mut round1_best: Vec<Option<Round1Best>> = vec![None; clouds.len()];
     for group in groups {
         let local = |i: usize| group.iter().position(|(j, _)| *j == i);
         let local_twins: Vec<(usize, usize)> = twins
@@ -196,9 +197,14 @@ fn searched_once(
             .collect();
         // (the preparation and the groups searched before count as stage 1)
         let searched_at = start.elapsed().as_secs_f64() * 1e3;
-        let found = search_group(evaluator, &group, &local_twins, &as_twin)?;
+        let free_fits: Vec<Option<Round1Best>> = group
+            .iter()
+            .map(|(i, _)| model_twins[*i].and_then(|free| round1_best[free]))
+            .collect();
+        let found = search_group(evaluator, &group, &local_twins, &as_twin, &free_fits)?;
         for ((i, p), f) in group.iter().zip(found) {
             by_likelihood[*i] = f.by_likelihood;
+            round1_best[*i] = f.round1_best;
             dropped[*i] = f.stopped_after;
             let best = &f.best;
             let mut r = report(
@@ -260,4 +266,44 @@ fn model_twins(clouds: &[(&[DVec3], &FitOptions)]) -> Vec<Option<usize>> {
                 .flatten()
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::CpuEvaluator;
+
+    /// `model: auto`'s two searches of one full cloud of `shape` (from nowhere): the free
+    /// fit's and the superellipsoid's.
+    fn both_searches(shape: Shape) -> (SearchOut, SearchOut) {
+        let pose = Pose::new(DQuat::from_rotation_x(0.4), DVec3::new(0.1, 0.0, 0.5));
+        let mut rng = synth::rng(5);
+        let mut points = synth::sample_surface(&shape, &pose, 1500, &mut rng);
+        synth::add_noise(&mut points, 0.0005, &mut rng);
+        let auto = FitOptions {
+            model: Model::Auto,
+            viewpoint: Viewpoint::None,
+            ..Default::default()
+        };
+        let options = crate::fit::fits_of_model(&auto).unwrap();
+        let clouds: Vec<(&[DVec3], &FitOptions)> =
+            options.iter().map(|o| (points.as_slice(), o)).collect();
+        let (results, _) = searched_once(&mut CpuEvaluator::new(), &clouds, &[]).unwrap();
+        let search = |r: &Result<FitReport, FitError>| r.as_ref().unwrap().search.clone().unwrap();
+        (search(&results[0]), search(&results[1]))
+    }
+
+    /// A ring's superellipsoid fit is far less likely than its free fit after round 1
+    /// and goes no further; a can's goes on beside its free fit.
+    #[test]
+    fn a_superellipsoid_far_behind_the_free_fit_stops_after_round_one() {
+        let (free, genus0) = both_searches(Shape::new(0.02, 0.02, 0.015, 2.5, 0.8, 1.0));
+        assert!(free.refined > 0, "{free:?}");
+        assert_eq!(genus0.refined, 0, "{genus0:?}");
+        let (free, genus0) = both_searches(Shape::new(0.04, 0.04, 0.06, 0.0, 0.2, 1.0));
+        assert!(
+            free.refined > 0 && genus0.refined > 0,
+            "{free:?} {genus0:?}"
+        );
+    }
 }

@@ -49,6 +49,12 @@ pub const TWIN_MARGIN: f64 = 0.2;
 /// lost 2 of 360 cases), but on fresh sets 1120000-1150000 no case of 720 changed at 1.0
 /// and full clouds' median fit time fell by 40% (`docs/fit.md`).
 pub const ROUND1_TWIN_MARGIN: f64 = 1.0;
+/// A superellipsoid fit (`model: auto`'s second) whose likeliest round-1 candidate is
+/// less likely than its cloud's free fit's by this much (mean log-likelihood per point, on
+/// the same sample) goes no further than round 1: the free fit holds every
+/// superellipsoid, so the gap only grows, and at a thousand points it is a BIC margin of
+/// two thousand.
+pub const MODEL_ROUND1_MARGIN: f64 = 1.0;
 /// The smallest noise sigma the likelihood is evaluated at (normalised units: the cloud's
 /// RMS radius is 1). Below it the fit is precise: least squares is the likelihood's own
 /// limit there, and finalists are told apart by their distance to the points.
@@ -288,17 +294,31 @@ pub(super) struct Found {
     pub stopped_after: Option<&'static str>,
     /// round 2 refined it by the likelihood (else by least squares)
     pub by_likelihood: bool,
+    /// its likeliest round-1 candidate's score, and whether round 1 read the cloud as
+    /// all round (what a superellipsoid fit of the cloud is held against)
+    pub round1_best: Option<Round1Best>,
     pub tried: SearchOut,
+}
+
+/// A cloud's likeliest candidate after round 1: its score (negative mean log-likelihood
+/// on the stage-1 sample) and how that sample was read.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Round1Best {
+    pub score: f64,
+    pub all_round: bool,
 }
 
 /// The search for every cloud of a group (clouds with one solver setting): round 1,
 /// the twin cut after it, round 2, the twin cut after it, the finalists.
 /// `by_likelihood`: the clouds round 2 refines by the likelihood whatever their noise.
+/// `free_fits`: for a superellipsoid fit, its cloud's free fit after round 1 (a
+/// superellipsoid far less likely goes no further, [`MODEL_ROUND1_MARGIN`]).
 pub(super) fn search_group(
     evaluator: &mut dyn Evaluator,
     group: &[(usize, Prepared)],
     twins: &[(usize, usize)],
     by_likelihood: &[bool],
+    free_fits: &[Option<Round1Best>],
 ) -> Result<Vec<Found>, FitError> {
     let t0 = Instant::now();
     let mut first = rounds::round1(evaluator, group, twins)?;
@@ -308,6 +328,15 @@ pub(super) fn search_group(
         ROUND1_TWIN_MARGIN,
         &mut first.dropped,
     );
+    let twin_dropped = first.dropped.clone();
+    for (cloud, free) in free_fits.iter().enumerate() {
+        if let (Some(free), Some(own)) = (free, first.kept[cloud].first())
+            && free.all_round == first.all_round[cloud]
+            && own.score > free.score + MODEL_ROUND1_MARGIN
+        {
+            first.dropped[cloud] = true;
+        }
+    }
     let t1 = t0.elapsed();
 
     let (round2, noisy_clouds) = rounds::round2(evaluator, group, &first, by_likelihood)?;
@@ -336,10 +365,15 @@ pub(super) fn search_group(
             round1_ms: ms(t1),
             finalists_ms: ms(t3 - t2),
             by_likelihood: noisy_clouds[cloud],
-            stopped_after: if first.dropped[cloud] {
+            round1_best: first.kept[cloud].first().map(|c| Round1Best {
+                score: c.score,
+                all_round: first.all_round[cloud],
+            }),
+            // (for a reading's twin: a superellipsoid held against its free fit is not one)
+            stopped_after: if twin_dropped[cloud] {
                 Some("round 1")
             } else {
-                dropped[cloud].then_some("round 2")
+                (dropped[cloud] && !first.dropped[cloud]).then_some("round 2")
             },
             tried: SearchOut {
                 starts: group[cloud].1.starts.len(),
