@@ -52,8 +52,8 @@ pub const ROUND1_TWIN_MARGIN: f64 = 1.0;
 /// A superellipsoid fit (`model: auto`'s second) whose likeliest round-1 candidate is
 /// less likely than its cloud's free fit's by this much (mean log-likelihood per point, on
 /// the same sample) goes no further than round 1: the free fit holds every
-/// superellipsoid, so the gap only grows, and at a thousand points it is a BIC margin of
-/// two thousand.
+/// superellipsoid, so the superellipsoid can gain on it only what round 1 left of its own
+/// convergence, and at a thousand points such a gap is a BIC margin of two thousand.
 pub const MODEL_ROUND1_MARGIN: f64 = 1.0;
 /// The smallest noise sigma the likelihood is evaluated at (normalised units: the cloud's
 /// RMS radius is 1). Below it the fit is precise: least squares is the likelihood's own
