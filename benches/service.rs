@@ -5,6 +5,7 @@
 //! (`auto`: both models fitted and weighed) and with `supertoroid` named. Each request
 //! encodes nothing: the body is built once, the time is the round trip on localhost
 //! (decoding, reading the pixels, the table, the fit, the answer).
+//! And whole `/v1/scene` requests of a frame with five objects.
 //! `cargo bench --bench service` (a server on the CPU evaluator, and one on the GPU where
 //! wgpu finds an adapter: lavapipe on a machine without one).
 
@@ -14,6 +15,7 @@ use glam::{DQuat, DVec3};
 use serde_json::{Value, json};
 use std::net::SocketAddr;
 use std::time::Duration;
+use supertoroid::bench::scenes::BenchFrame;
 use supertoroid::eval::{AdapterChoice, Backend, GpuContext};
 use supertoroid::io::depth::encode_depth_png;
 use supertoroid::model::{Plane, Pose, Shape};
@@ -106,18 +108,13 @@ fn bench_depth_requests(c: &mut Criterion) {
         }
         body
     };
-    let mut backends = vec![Backend::Cpu];
-    match GpuContext::shared(&AdapterChoice::from_env()) {
-        Ok(_) => backends.push(Backend::Gpu),
-        Err(e) => eprintln!("no GPU adapter, CPU only: {e}"),
-    }
     let client = reqwest::blocking::Client::new();
     let mut group = c.benchmark_group(format!("depth request, mask of {mask_pixels} pixels"));
     group
         .sample_size(20)
         .warm_up_time(Duration::from_millis(500))
         .measurement_time(Duration::from_secs(5));
-    for backend in backends {
+    for backend in backends() {
         let url = format!("http://{}/v1/fit/depth", start(backend));
         for (selection, model) in [("mask", None), ("mask", Some("supertoroid")), ("box", None)] {
             let body = body(selection, model).to_string();
@@ -141,5 +138,54 @@ fn bench_depth_requests(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_depth_requests);
+/// Whole `/v1/scene` requests: `bench scenes`' frame 860002 (five objects on a table, with
+/// and without a hole, the D435-like sensor), every object fitted with `model` auto.
+fn bench_scene_requests(c: &mut Criterion) {
+    let frame = BenchFrame::new(860_002).expect("the frame renders");
+    let k = frame.scene.camera.intrinsics;
+    let body = json!({
+        "depth_png": base64::engine::general_purpose::STANDARD.encode(encode_depth_png(&frame.depth)),
+        "intrinsics": {"fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy},
+        "depth_scale": frame.depth.scale,
+        "options": {"seed": 1}
+    })
+    .to_string();
+    let client = reqwest::blocking::Client::new();
+    let mut group = c.benchmark_group(format!(
+        "scene request, {} objects",
+        frame.scene.objects.len()
+    ));
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(15));
+    for backend in backends() {
+        let url = format!("http://{}/v1/scene", start(backend));
+        let post = || {
+            let response = client
+                .post(&url)
+                .header("content-type", "application/json")
+                .body(body.clone())
+                .send()
+                .expect("the service answers");
+            assert_eq!(response.status(), 200, "{}", response.text().unwrap());
+            response.bytes().unwrap()
+        };
+        post();
+        group.bench_function(format!("{backend:?}"), |b| b.iter(post));
+    }
+    group.finish();
+}
+
+/// The CPU evaluator, and the GPU one where wgpu finds an adapter.
+fn backends() -> Vec<Backend> {
+    let mut backends = vec![Backend::Cpu];
+    match GpuContext::shared(&AdapterChoice::from_env()) {
+        Ok(_) => backends.push(Backend::Gpu),
+        Err(e) => eprintln!("no GPU adapter, CPU only: {e}"),
+    }
+    backends
+}
+
+criterion_group!(benches, bench_depth_requests, bench_scene_requests);
 criterion_main!(benches);
