@@ -119,16 +119,7 @@ fn bench_depth_requests(c: &mut Criterion) {
         for (selection, model) in [("mask", None), ("mask", Some("supertoroid")), ("box", None)] {
             let body = body(selection, model).to_string();
             let name = format!("{selection}, model {}", model.unwrap_or("auto (default)"));
-            let post = || {
-                let response = client
-                    .post(&url)
-                    .header("content-type", "application/json")
-                    .body(body.clone())
-                    .send()
-                    .expect("the service answers");
-                assert_eq!(response.status(), 200, "{}", response.text().unwrap());
-                response.bytes().unwrap()
-            };
+            let post = || post_json(&client, &url, &body);
             post();
             group.bench_function(BenchmarkId::new(format!("{backend:?}"), name), |b| {
                 b.iter(post)
@@ -161,20 +152,23 @@ fn bench_scene_requests(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(15));
     for backend in backends() {
         let url = format!("http://{}/v1/scene", start(backend));
-        let post = || {
-            let response = client
-                .post(&url)
-                .header("content-type", "application/json")
-                .body(body.clone())
-                .send()
-                .expect("the service answers");
-            assert_eq!(response.status(), 200, "{}", response.text().unwrap());
-            response.bytes().unwrap()
-        };
+        let post = || post_json(&client, &url, &body);
         post();
         group.bench_function(format!("{backend:?}"), |b| b.iter(post));
     }
     group.finish();
+}
+
+/// `body` posted as JSON to `url`, answered 200: the answer's length (read whole).
+fn post_json(client: &reqwest::blocking::Client, url: &str, body: &str) -> usize {
+    let response = client
+        .post(url)
+        .header("content-type", "application/json")
+        .body(body.to_owned())
+        .send()
+        .expect("the service answers");
+    assert_eq!(response.status(), 200, "{}", response.text().unwrap());
+    response.bytes().unwrap().len()
 }
 
 /// The CPU evaluator, and the GPU one where wgpu finds an adapter.
