@@ -17,12 +17,12 @@ WORKDIR /src
 # The crates first, in their own layer: a change to the sources rebuilds only this crate.
 COPY Cargo.toml Cargo.lock ./
 COPY vendo[r] vendor/
+COPY scripts/placeholder-sources /usr/local/bin/
 RUN if [ -d vendor ]; then \
         mkdir -p .cargo && \
         printf '[source.crates-io]\nreplace-with = "vendored"\n[source.vendored]\ndirectory = "vendor"\n' > .cargo/config.toml; \
     fi && \
-    mkdir -p src benches && echo 'fn main() {}' > src/main.rs && touch src/lib.rs && \
-    for b in evaluator fit grasp; do echo 'fn main() {}' > benches/$b.rs; done && \
+    placeholder-sources && \
     cargo build --release --locked --bin supertoroid && \
     rm -rf src benches
 COPY src src/
