@@ -183,7 +183,7 @@ pub trait Evaluator: Send {
         loss: Loss,
     ) -> Result<Vec<NormalEquations>, EvalError>;
     /// Costs only, a fraction of the work of normal equations: for scoring candidates.
-    /// (The solver no longer calls it: it evaluates each trial step with its normal
+    /// (The solver does not call it: it evaluates each trial step with its normal
     /// equations, which the next iteration reuses.)
     fn costs_on(
         &mut self,

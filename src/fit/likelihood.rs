@@ -31,12 +31,9 @@
 //! It runs on shapes with a hole (a4 > 1, where the grid covers the surface once), and
 //! only when the noise is large enough to bias least squares
 //! ([`super::LIKELIHOOD_NOISE_RATIO`], [`super::LIKELIHOOD_VIEW_NOISE_RATIO`]): below that
-//! it would cost time for nothing. Measured on the ground-truth suite (540 cases, seeds
-//! 10000, 20000, 30000): full clouds 228 -> 265 of 270 within tolerance, single views
-//! 139 -> 176; the fits it runs on take 20-150 ms more (see the README). With the view
-//! model corrected (back faces culled, grazing faces kept: `visibility`; the pose
-//! moving the view weights in the gradient) and the kernel cut at 4 sigmas instead of
-//! 3.5 ([`CUTOFF`]), 268 and 238. The search polishes with it ([`super::search::polish`]).
+//! it would cost time for nothing. The search polishes its fits with it
+//! ([`super::search::polish`]); what the polish earns, and what it costs, is measured in
+//! `docs/fit.md` (`supertoroid bench ablation`).
 
 mod derivatives;
 mod grid;
