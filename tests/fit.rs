@@ -1791,14 +1791,14 @@ fn both_models_of_a_cloud_are_weighed_at_their_likelihoods_maximum() {
 
 /// A box whose free fit (an apple, its dimple under the noise) beats its superellipsoid fit
 /// by less than positive evidence (`model_choice::MIN_EVIDENCE`) stays a superellipsoid:
-/// the two such cases of the model-choice sets 610000-680000 (BIC margins 1.4 and 0.8).
+/// the one such case of the model-choice sets 610000-680000 (a BIC margin of 0.8).
 #[test]
 fn a_free_fit_a_hair_likelier_does_not_make_a_box_an_apple() {
     use supertoroid::fit::Model;
     use supertoroid::fit::model_choice::MIN_EVIDENCE;
     use supertoroid::suite::ground_truth::Kind;
     let mut evaluator = CpuEvaluator::new();
-    for seed in [620_141u64, 680_083] {
+    for seed in [680_083u64] {
         let (kind, _, r, _) = auto_fit_of_model_case(&mut evaluator, seed);
         assert_eq!(kind, Kind::Superellipsoid);
         let bic = r.model.bic.expect("auto reports both scores");
