@@ -81,9 +81,9 @@ pub struct Minimum {
 
 /// Minimises `problem` from `x` by Levenberg-Marquardt (damping 1e-3 at the start,
 /// scaled by [`accepted_damping_factor`] after an accepted step, x4 after a rejected one,
-/// stopping above 1e6). A step whose
-/// value in its own new reference is above the last accepted value counts as rejected,
-/// and the problem goes back to the reference it had before ([`LikelihoodProblem::restore`]).
+/// stopping above 1e6). A step whose value in its own new reference is above the last
+/// accepted value counts as rejected, and the problem goes back to the reference it had
+/// before ([`LikelihoodProblem::restore`]).
 pub fn minimise(
     problem: &mut impl LikelihoodProblem,
     mut x: Vector,
