@@ -17,7 +17,10 @@
 //!
 //! A cloud read both as a view from its frame's origin and as a view from nowhere is
 //! searched in both readings in the same batch; a reading plainly less likely after round 2
-//! ([`TWIN_MARGIN`]), or after round 1 by far ([`ROUND1_TWIN_MARGIN`]), goes no further.
+//! ([`TWIN_MARGIN`]), or after round 1 by far ([`ROUND1_TWIN_MARGIN`]), goes no further,
+//! and so does, after round 1, the reading from nowhere whose points do not cover its
+//! likeliest candidate all round ([`LIKELIHOOD_MIN_COVERAGE`]) where it is no likelier
+//! than the view.
 //!
 //! Least squares does the broad work because it is cheap and batched on the evaluator;
 //! the likelihood judges, because it is the one measure that sees what least squares

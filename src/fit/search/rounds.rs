@@ -12,7 +12,8 @@ pub(super) struct Round1 {
     /// the cloud (with no viewpoint) covers its object all round
     pub all_round: Vec<bool>,
     pub stage1_iterations: Vec<usize>,
-    /// the reading goes no further (its twin's is far more likely)
+    /// the reading goes no further (a view's reading from nowhere that its points do
+    /// not cover all round; see `search_group` for the other cuts)
     pub dropped: Vec<bool>,
 }
 
@@ -122,11 +123,21 @@ pub(super) fn round1(
             kept.push(likeliest);
         }
     }
+    // A view's reading from nowhere rests on its points covering the object all round.
+    // Where they do not cover that reading's likeliest candidate, and it is no likelier
+    // than the view's, nothing speaks for it: it goes no further.
+    let mut dropped = vec![false; group.len()];
+    for &(view, nowhere) in twins {
+        if let (Some(as_view), Some(all_round)) = (kept[view].first(), kept[nowhere].first()) {
+            dropped[nowhere] =
+                all_round.score >= as_view.score && !covers(&group[nowhere].1, all_round);
+        }
+    }
     Ok(Round1 {
         kept,
         all_round,
         stage1_iterations,
-        dropped: vec![false; group.len()],
+        dropped,
     })
 }
 
