@@ -1844,8 +1844,8 @@ fn broadened_views_through_a_depth_sensor_are_fitted_with_no_options() {
 
 /// A single view in its camera's frame is searched as a view and from nowhere; the
 /// reading from nowhere rests on its points covering the object all round, so where they
-/// cover its likeliest round-1 candidate no more than a view does and it is no likelier
-/// than the view, it goes no further than round 1. Twelve of the suite's views with noise
+/// cover less than `LIKELIHOOD_MIN_COVERAGE` of its likeliest round-1 candidate (as a
+/// view's points do) and it is no likelier than the view, it goes no further than round 1. Twelve of the suite's views with noise
 /// and outliers: every one fitted as a view, at least six with the other reading stopped
 /// after round 1 (the rest go on until the likelihood tells them apart after round 2),
 /// and at least eleven within tolerance (measured when written: 7 stopped, 1 without the
