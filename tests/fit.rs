@@ -1115,10 +1115,7 @@ fn the_polish_on_all_points_recovers_noisy_fits() {
         let case = make_case(seed, partial, noise, outliers);
         let (points, viewpoint, back) = presented(&case, Presentation::Camera);
         let right = |r: &FitReport| {
-            let pose = supertoroid::model::Pose::new(
-                back.rotation * r.fitted.1.rotation,
-                back.to_world(r.fitted.1.translation),
-            );
+            let pose = back.compose(&r.fitted.1);
             compare((&case.shape, &case.pose), (&r.fitted.0, &pose)).success()
         };
         let options = |polish_points| FitOptions {
@@ -1488,11 +1485,7 @@ fn recovered_as_posted(method: supertoroid::fit::Method) -> usize {
             "case {seed}: {:?}",
             report.warnings
         );
-        let pose = &report.fitted.1;
-        let in_world = supertoroid::model::Pose::new(
-            camera.rotation * pose.rotation,
-            camera.to_world(pose.translation),
-        );
+        let in_world = camera.compose(&report.fitted.1);
         let success = compare((&case.shape, &case.pose), (&report.fitted.0, &in_world)).success();
         eprintln!("{method:?} case {seed}: recovered {success}");
         recovered += success as usize;
@@ -1735,9 +1728,7 @@ fn auto_tells_rings_from_boxes_and_cans_on_single_views() {
         let (partial, noise, _) = category((seed % 1000) as usize / 2);
         assert!(partial && noise > 0.0);
         let (kind, case, r, back) = auto_fit_of_model_case(&mut evaluator, seed);
-        let f = r.fitted.1;
-        let pose =
-            supertoroid::model::Pose::new(back.rotation * f.rotation, back.to_world(f.translation));
+        let pose = back.compose(&r.fitted.1);
         let bic = r.model.bic.expect("auto reports both scores");
         match kind {
             Kind::Holed => {
@@ -1879,10 +1870,7 @@ fn a_views_reading_from_nowhere_that_its_points_do_not_cover_stops_after_round_o
         let s = r.search.as_ref().expect("the default method searches");
         stopped += usize::from(s.other_reading_went_to.as_deref() == Some("round 1"));
         let (shape, pose) = &r.fitted;
-        let pose = supertoroid::model::Pose::new(
-            back.rotation * pose.rotation,
-            back.to_world(pose.translation),
-        );
+        let pose = back.compose(pose);
         right += usize::from(compare((&case.shape, &case.pose), (shape, &pose)).success());
     }
     assert!(

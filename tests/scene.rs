@@ -226,10 +226,7 @@ fn the_depth_route_with_only_a_box_fits_the_object_and_refuses_a_bare_table() {
     let fit = fitted_from_depth(&server, &body(roi));
     let object: supertoroid::model::FittedObject = serde_json::from_value(fit.clone()).unwrap();
     let (fitted, in_camera) = object.validated().unwrap();
-    let in_world = Pose::new(
-        camera.pose.rotation * in_camera.rotation,
-        camera.pose.to_world(in_camera.translation),
-    );
+    let in_world = camera.pose.compose(&in_camera);
     let errors = supertoroid::suite::ground_truth::compare((&shape, &pose), (&fitted, &in_world));
     assert!(errors.success(), "{errors:?}: {}", fit["shape"]);
     // the table comes back, and the grasps keep the hand above it

@@ -10,7 +10,6 @@ use super::{Machine, Report, Stats};
 use crate::eval::{Backend, make_evaluator};
 use crate::fit::ablation::{self, Stage};
 use crate::fit::{FitOptions, fit};
-use crate::model::Pose;
 use crate::suite::ground_truth::{compare, make_case};
 use clap::ValueEnum;
 use serde::Serialize;
@@ -91,11 +90,7 @@ pub fn run(
                 }
                 Err(e) => return Err(format!("case {case_seed}: {e}")),
             };
-            let fitted = report.fitted.1;
-            let pose = Pose::new(
-                back.rotation * fitted.rotation,
-                back.to_world(fitted.translation),
-            );
+            let pose = back.compose(&report.fitted.1);
             let success = compare((&case.shape, &case.pose), (&report.fitted.0, &pose)).success();
             outcomes[v].push((case_seed, partial, success, report.timing_ms.total));
         }

@@ -121,10 +121,7 @@ fn judged(
         Err(e) => return Err(format!("case {}: {e}", refused.seed)),
     };
     let (shape, fitted) = report.fitted;
-    let pose = Pose::new(
-        back.rotation * fitted.rotation,
-        back.to_world(fitted.translation),
-    );
+    let pose = back.compose(&fitted);
     let chosen = report.model.kind;
     let model_right = match refused.kind {
         Kind::Holed => chosen == Model::Supertoroid,

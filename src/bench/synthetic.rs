@@ -345,11 +345,7 @@ pub fn run(
             }
             Err(e) => return Err(format!("case {case_seed}: {e}")),
         };
-        let fitted = &report.fitted.1;
-        report.fitted.1 = Pose::new(
-            back.rotation * fitted.rotation,
-            back.to_world(fitted.translation),
-        );
+        report.fitted.1 = back.compose(&report.fitted.1);
         let e = compare(
             (&case.shape, &case.pose),
             (&report.fitted.0, &report.fitted.1),

@@ -49,10 +49,7 @@ impl SceneExport {
             .into_iter()
             .map(|(shape, pose)| ExportObject {
                 shape,
-                pose: Pose::new(
-                    to_world.rotation * pose.rotation,
-                    to_world.to_world(pose.translation),
-                ),
+                pose: to_world.compose(&pose),
             })
             .collect();
         let plane = plane

@@ -234,6 +234,15 @@ impl Pose {
         self.rotation.inverse() * (world - self.translation)
     }
 
+    /// This pose after `inner`: canonical points mapped by `inner`, then by this pose (a
+    /// fit in a camera's frame taken to the world by the camera's pose).
+    pub fn compose(&self, inner: &Pose) -> Pose {
+        Pose::new(
+            self.rotation * inner.rotation,
+            self.to_world(inner.translation),
+        )
+    }
+
     /// The hole axis (canonical z) in world coordinates.
     pub fn axis(&self) -> DVec3 {
         self.rotation * DVec3::Z
@@ -279,4 +288,18 @@ pub fn parse_floats<const N: usize>(text: &str, what: &str) -> Result<[f64; N], 
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_composed_pose_maps_a_point_as_its_two_poses_in_turn() {
+        let outer = Pose::new(DQuat::from_rotation_x(0.7), DVec3::new(1.0, -2.0, 0.5));
+        let inner = Pose::new(DQuat::from_rotation_z(-1.1), DVec3::new(0.2, 0.3, 4.0));
+        let p = DVec3::new(0.3, -0.4, 0.9);
+        let composed = outer.compose(&inner).to_world(p);
+        assert!(composed.distance(outer.to_world(inner.to_world(p))) < 1e-12);
+    }
 }
