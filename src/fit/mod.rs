@@ -253,13 +253,29 @@ pub fn fit_batch(
         .flat_map(|(points, fits)| fits.iter().map(move |o| (points, o)))
         .collect();
     let mut fits = fit_batch_unscreened(evaluator, &jobs)?.into_iter();
-    Ok(clouds
-        .iter()
-        .zip(plans)
-        .zip(inputs)
-        .zip(cleaned.iter().map(|(_, spent)| *spent))
-        .map(|((((points, _), plan), input), spent)| {
+    // each cloud's fits, in the order its jobs were made
+    type Fits = Result<(Vec<FitOptions>, Vec<Result<FitReport, FitError>>), FitError>;
+    let per_cloud: Vec<Fits> = plans
+        .into_iter()
+        .map(|plan| {
             let options = plan?;
+            let reports = options
+                .iter()
+                .map(|_| fits.next().expect("one fit per job"))
+                .collect();
+            Ok((options, reports))
+        })
+        .collect();
+    // (the clouds' models weighed side by side: each weighing is a few dozen scores of
+    // the objective)
+    use rayon::prelude::*;
+    Ok(clouds
+        .par_iter()
+        .zip(per_cloud)
+        .zip(inputs)
+        .zip(cleaned.par_iter().map(|(_, spent)| *spent))
+        .map(|((((points, _), fitted), input), spent)| {
+            let (options, reports) = fitted?;
             let with_input = |mut r: FitReport| {
                 r.points.isolated = input - points.len();
                 r.points.input = input;
@@ -271,10 +287,9 @@ pub fn fit_batch(
                 }
                 r
             };
-            if options.len() == 2 {
-                let holed = fits.next().expect("one fit per model");
-                let genus0 = fits.next().expect("one fit per model");
-                match (holed, genus0) {
+            let mut reports = reports.into_iter();
+            match (reports.next(), reports.next()) {
+                (Some(holed), Some(genus0)) => match (holed, genus0) {
                     (Ok(h), Ok(g)) => Ok(with_input(model_choice::choose(
                         points,
                         options[0].field_of_view,
@@ -283,14 +298,12 @@ pub fn fit_batch(
                     ))),
                     (Ok(one), Err(_)) | (Err(_), Ok(one)) => Ok(with_input(one)),
                     (Err(e), Err(_)) => Err(e),
-                }
-            } else {
-                fits.next()
-                    .expect("one fit per screened cloud")
-                    .map(|mut r| {
-                        r.model = ModelOut::requested(&r.shape);
-                        with_input(r)
-                    })
+                },
+                (Some(one), None) => one.map(|mut r| {
+                    r.model = ModelOut::requested(&r.shape);
+                    with_input(r)
+                }),
+                _ => unreachable!("one or two fits per screened cloud"),
             }
         })
         .collect())

@@ -163,7 +163,8 @@ pub fn choose(
         let value = 2.0 * n * nll + k * n.ln();
         if value.is_nan() { f64::INFINITY } else { value }
     };
-    let (holed_bic, genus0_bic) = (bic(&holed), bic(&genus0));
+    // (side by side: each score's per-shape tables are one thread's work)
+    let (holed_bic, genus0_bic) = rayon::join(|| bic(&holed), || bic(&genus0));
     let both_ms = holed.timing_ms.total.max(genus0.timing_ms.total);
     // a free fit that came out at a4 = 0 is a superellipsoid too: the better of the two
     // then stands for that model, and there is no supertoroid to weigh against it
