@@ -979,3 +979,51 @@ fn a_boxs_table_makes_its_object_rest_on_it_and_a_mask_is_seen_from_the_camera()
     assert_eq!(kept.field_of_view, None);
     assert_eq!(kept.resting_on, Some(table));
 }
+
+/// A box seen through the depth sensor whose free fit is an apple with no dimple to
+/// speak of (a4 bent to the noise at its edges), likelier than the superellipsoid by
+/// more than the BIC's evidence, is a superellipsoid (`model_choice::DIMPLE_SIGMAS`):
+/// frame 900009 of `bench scenes` has one, and its superellipsoid fit is right.
+#[test]
+fn a_box_whose_free_fit_is_an_apple_without_a_dimple_is_a_superellipsoid() {
+    use supertoroid::bench::scenes::{BenchFrame, judge};
+    use supertoroid::eval::CpuEvaluator;
+    use supertoroid::fit::model_choice::MIN_EVIDENCE;
+    use supertoroid::fit::{FitOptions, Model};
+    use supertoroid::scene::fit::fit_scene;
+    use supertoroid::scene::objects::SceneOptions;
+    let seed = 900_009;
+    let frame = BenchFrame::new(seed).unwrap();
+    let options = FitOptions {
+        seed,
+        model: Model::Auto,
+        ..Default::default()
+    };
+    let report = fit_scene(
+        &mut CpuEvaluator::new(),
+        &frame.pixels,
+        &SceneOptions::default(),
+        &options,
+    )
+    .unwrap();
+    let mut decided = 0;
+    for object in &report.objects {
+        let Some(fit) = object.fit.as_ref() else {
+            continue;
+        };
+        if fit.model.chosen_by != "dimple_unseen" {
+            continue;
+        }
+        decided += 1;
+        let bic = fit.model.bic.expect("both models weighed");
+        // the BIC alone would have taken the apple
+        let apple = bic.supertoroid.expect("a free fit with a4 over 0");
+        assert!(apple + MIN_EVIDENCE < bic.superellipsoid, "{bic:?}");
+        assert_eq!(fit.model.kind, Model::Superellipsoid);
+        let truth = frame.owner(&object.pixels).expect("one object's pixels");
+        let (shape, pose) = frame.truth(truth);
+        assert_eq!(shape.a4, 0.0, "a box, can or bottle");
+        assert!(judge(&shape, &pose, Some(fit)).right(), "{fit:?}");
+    }
+    assert!(decided >= 1, "no object decided by its dimple");
+}
