@@ -235,9 +235,42 @@ pub fn turned_dual(candidate: &Candidate) -> Candidate {
     }
 }
 
+/// The superellipsoid (a4 = 0) with the outline of `free`, a free fit of the same
+/// cloud: its radii a1·(1 + a4) and a2·(1 + a4) (an apple's or a ring's outer
+/// radius), its height, exponents and pose. `model: auto`'s superellipsoid search starts
+/// there too: a box's free fit is often an apple without a dimple whose surface is
+/// right, and the superellipsoid's own starts need not reach that basin.
+pub fn superellipsoid_outline(free: &Candidate) -> Candidate {
+    let s = free.shape;
+    let grown = 1.0 + s.a4.max(0.0);
+    Candidate {
+        shape: Shape::new(s.a1 * grown, s.a2 * grown, s.a3, 0.0, s.eps1, s.eps2),
+        pose: free.pose,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An apple's and a ring's outline is their outer radius; a superellipsoid is its
+    /// own outline.
+    #[test]
+    fn a_free_fits_outline_keeps_its_outer_radii_height_and_pose() {
+        let pose = Pose::new(DQuat::from_rotation_x(0.3), DVec3::new(0.1, 0.2, 0.3));
+        for (a4, grown) in [(0.5, 1.5), (2.0, 3.0), (0.0, 1.0)] {
+            let free = Candidate {
+                shape: Shape::new(0.02, 0.03, 0.04, a4, 0.3, 1.2),
+                pose,
+            };
+            let outline = superellipsoid_outline(&free);
+            assert_eq!(
+                outline.shape.to_array(),
+                [0.02 * grown, 0.03 * grown, 0.04, 0.0, 0.3, 1.2]
+            );
+            assert_eq!(outline.pose, pose);
+        }
+    }
     use crate::model::superellipse_norm;
 
     /// The radius of a candidate's mean superellipse along a world direction in its

@@ -185,7 +185,18 @@ fn searched_once(
     let model_twins = model_twins(clouds);
     let mut by_likelihood = vec![false; clouds.len()];
     let mut round1_best: Vec<Option<Round1Best>> = vec![None; clouds.len()];
-    for group in groups {
+    let mut free_best: Vec<Option<Candidate>> = vec![None; clouds.len()];
+    for mut group in groups {
+        // a superellipsoid fit starts at its cloud's free fit's outline too (both clouds
+        // share one normalisation): where the free fit is an apple without a dimple, the
+        // superellipsoid it stands for is there (`model_choice::DIMPLE_SIGMAS`)
+        for (i, p) in &mut group {
+            if let Some(free) = model_twins[*i].and_then(|free| free_best[free]) {
+                let mut start = starts::superellipsoid_outline(&free);
+                start.shape = crate::fit::prepare::holding_known(start.shape, &p.known);
+                p.starts.push(start);
+            }
+        }
         let local = |i: usize| group.iter().position(|(j, _)| *j == i);
         let local_twins: Vec<(usize, usize)> = twins
             .iter()
@@ -205,6 +216,7 @@ fn searched_once(
         for ((i, p), f) in group.iter().zip(found) {
             by_likelihood[*i] = f.by_likelihood;
             round1_best[*i] = f.round1_best;
+            free_best[*i] = Some(f.best.candidate);
             dropped[*i] = f.stopped_after;
             let best = &f.best;
             let mut r = report(
@@ -305,5 +317,13 @@ mod tests {
             free.refined > 0 && genus0.refined > 0,
             "{free:?} {genus0:?}"
         );
+    }
+
+    /// The superellipsoid's search has every start the free fit's has (a4 held at 0), and
+    /// the free fit's outline besides.
+    #[test]
+    fn the_superellipsoid_search_starts_at_the_free_fits_outline_too() {
+        let (free, genus0) = both_searches(Shape::new(0.04, 0.04, 0.06, 0.0, 0.2, 1.0));
+        assert_eq!(genus0.starts, free.starts + 1, "{free:?} {genus0:?}");
     }
 }
