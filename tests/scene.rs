@@ -827,29 +827,16 @@ fn the_depth_route_warns_an_object_the_images_edge_cuts() {
 
 #[test]
 fn an_object_the_frames_edge_cuts_is_fitted_past_the_edge_and_warned() {
-    use supertoroid::bench::scenes::BenchFrame;
     use supertoroid::eval::CpuEvaluator;
-    use supertoroid::fit::{FitOptions, Model, fit_batch};
-    use supertoroid::scene::fit::{fit_scene, object_clouds, object_options};
+    use supertoroid::fit::fit_batch;
+    use supertoroid::scene::fit::{object_clouds, object_options};
     use supertoroid::scene::objects::{SceneOptions, segment};
     use supertoroid::suite::chamfer::{CHAMFER_BOUND, relative_chamfer};
     // a frame of `bench scenes` whose box (no hole) stands half out of the frame's left
     // edge: 45% of its silhouette is in the frame
     let seed = 830_008;
-    let frame = BenchFrame::new(seed).unwrap();
-    let fit_options = FitOptions {
-        seed,
-        model: Model::Auto,
-        ..Default::default()
-    };
+    let (frame, fit_options, report) = bench_frame_fitted(seed);
     let mut evaluator = CpuEvaluator::new();
-    let report = fit_scene(
-        &mut evaluator,
-        &frame.pixels,
-        &SceneOptions::default(),
-        &fit_options,
-    )
-    .unwrap();
     let cut_index = report
         .objects
         .iter()
@@ -986,26 +973,10 @@ fn a_boxs_table_makes_its_object_rest_on_it_and_a_mask_is_seen_from_the_camera()
 /// frame 900009 of `bench scenes` has one, and its superellipsoid fit is right.
 #[test]
 fn a_box_whose_free_fit_is_an_apple_without_a_dimple_is_a_superellipsoid() {
-    use supertoroid::bench::scenes::{BenchFrame, judge};
-    use supertoroid::eval::CpuEvaluator;
+    use supertoroid::bench::scenes::judge;
+    use supertoroid::fit::Model;
     use supertoroid::fit::model_choice::MIN_EVIDENCE;
-    use supertoroid::fit::{FitOptions, Model};
-    use supertoroid::scene::fit::fit_scene;
-    use supertoroid::scene::objects::SceneOptions;
-    let seed = 900_009;
-    let frame = BenchFrame::new(seed).unwrap();
-    let options = FitOptions {
-        seed,
-        model: Model::Auto,
-        ..Default::default()
-    };
-    let report = fit_scene(
-        &mut CpuEvaluator::new(),
-        &frame.pixels,
-        &SceneOptions::default(),
-        &options,
-    )
-    .unwrap();
+    let (frame, _, report) = bench_frame_fitted(900_009);
     let mut decided = 0;
     for object in &report.objects {
         let Some(fit) = object.fit.as_ref() else {
@@ -1026,4 +997,31 @@ fn a_box_whose_free_fit_is_an_apple_without_a_dimple_is_a_superellipsoid() {
         assert!(judge(&shape, &pose, Some(fit)).right(), "{fit:?}");
     }
     assert!(decided >= 1, "no object decided by its dimple");
+}
+
+/// `bench scenes`' frame `seed` fitted as `/v1/scene` fits it (`model` auto, the CPU
+/// evaluator): the frame, the fits' options and the scene.
+fn bench_frame_fitted(
+    seed: u64,
+) -> (
+    supertoroid::bench::scenes::BenchFrame,
+    supertoroid::fit::FitOptions,
+    supertoroid::scene::fit::SceneReport,
+) {
+    use supertoroid::fit::{FitOptions, Model};
+    use supertoroid::scene::objects::SceneOptions;
+    let frame = supertoroid::bench::scenes::BenchFrame::new(seed).unwrap();
+    let options = FitOptions {
+        seed,
+        model: Model::Auto,
+        ..Default::default()
+    };
+    let report = supertoroid::scene::fit::fit_scene(
+        &mut supertoroid::eval::CpuEvaluator::new(),
+        &frame.pixels,
+        &SceneOptions::default(),
+        &options,
+    )
+    .unwrap();
+    (frame, options, report)
 }

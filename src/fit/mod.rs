@@ -61,6 +61,7 @@ use crate::model::{Pose, Shape};
 use crate::solve::{Bounds, Solution, SolverOptions, Stop, solve_on};
 use crate::synth;
 use glam::{DMat3, DQuat, DVec3};
+use rayon::prelude::*;
 use std::time::Instant;
 
 /// Fewest points a fit accepts.
@@ -268,7 +269,6 @@ pub fn fit_batch(
         .collect();
     // (the clouds' models weighed side by side: each weighing is a few dozen scores of
     // the objective)
-    use rayon::prelude::*;
     Ok(clouds
         .par_iter()
         .zip(per_cloud)

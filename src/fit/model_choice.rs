@@ -11,9 +11,10 @@
 //! minimises it, n the points scored and k the free parameters (12 for the supertoroid:
 //! six of shape, six of pose; 11 for the superellipsoid, whose a4 is fixed). The lower
 //! BIC is chosen, the supertoroid only by at least [`MIN_EVIDENCE`], and an apple (a4 < 1)
-//! only where its dimple is deeper than the noise ([`dimple_depth`], [`DIMPLE_SIGMAS`]):
-//! on a depth sensor's views of boxes the free fit bends its profile to the noise at the
-//! edges with a4 and wins the BIC by 3-300 with a dimple a fraction of a noise sigma deep.
+//! only where its dimple is deeper than the noise ([`DIMPLE_SIGMAS`],
+//! [`crate::model::Shape::dimple_depth`]): on a depth sensor's views of boxes the free fit
+//! bends its profile to the noise at the edges with a4 and wins the BIC by 3-300 with a
+//! dimple a fraction of a noise sigma deep.
 //! The report gives both scores and their margin. A superellipsoid is the
 //! supertoroid at a4 = 0, so the penalty decides only where the data cannot tell them
 //! apart. The BIC wants each model at its likelihood's maximum: the search refines the
@@ -54,15 +55,6 @@ pub const MIN_EVIDENCE: f64 = 2.0;
 /// fresh 920000 the rule took 10, 2 and 3 objects to the right model and fit, none the
 /// other way (`docs/scenes.md`).
 pub const DIMPLE_SIGMAS: f64 = 2.0;
-
-/// How far an apple's surface dips below its top where it meets its axis (eq. (1) at
-/// eta_max, [`crate::model::Shape::eta_range`]); infinite for a ring (a4 >= 1).
-pub fn dimple_depth(shape: &crate::model::Shape) -> f64 {
-    if shape.a4 >= 1.0 {
-        return f64::INFINITY;
-    }
-    shape.a3 - shape.surface_point(shape.eta_range(), 0.0).z
-}
 
 /// A free fit whose a4 comes out below this is a superellipsoid (the solver stops a
 /// margin inside its bounds, not on them), and is reported with a4 = 0.
@@ -190,7 +182,7 @@ pub fn choose(
     // then stands for that model, and there is no supertoroid to weigh against it
     // (and a free fit with no hole whose dimple the noise hides is no evidence of one,
     // whatever its BIC: an apple's a4 bends its profile to the sensor's noise)
-    let dimple_unseen = dimple_depth(&holed.shape) < DIMPLE_SIGMAS * holed.quality.noise_sigma;
+    let dimple_unseen = holed.shape.dimple_depth() < DIMPLE_SIGMAS * holed.quality.noise_sigma;
     let (supertoroid, superellipsoid, mut chosen, kind, chosen_by) =
         if is_superellipsoid(&holed.shape) {
             let (best, value) = if holed_bic < genus0_bic {
@@ -341,25 +333,5 @@ mod tests {
             );
             assert!(evaluations.get() <= 12, "{}", evaluations.get());
         }
-    }
-
-    /// A superellipsoid has no dimple and a ring a hole; an apple's dimple is deep where
-    /// its section is round and vanishes as its section squares off (a box's shallow
-    /// apple fit).
-    #[test]
-    fn an_apples_dimple_is_where_its_surface_meets_its_axis() {
-        use crate::model::Shape;
-        let depth = |a4, eps1| dimple_depth(&Shape::new(0.04, 0.03, 0.05, a4, eps1, 1.0));
-        assert_eq!(depth(0.0, 0.5), 0.0);
-        assert_eq!(depth(1.5, 0.5), f64::INFINITY);
-        // round section: it meets the axis at cos(eta) = -a4, z = a3·sqrt(1 - a4²)
-        let expected = 0.05 * (1.0 - (1.0f64 - 0.49).sqrt());
-        assert!(
-            (depth(0.7, 1.0) - expected).abs() < 1e-12,
-            "{}",
-            depth(0.7, 1.0)
-        );
-        // a squared-off section: under a thousandth of its height
-        assert!(depth(0.55, 0.19) < 1e-3 * 0.05, "{}", depth(0.55, 0.19));
     }
 }

@@ -157,6 +157,16 @@ impl Shape {
     pub fn has_hole(&self) -> bool {
         self.a4 > 1.0
     }
+
+    /// How far the surface dips below its top where it meets the z axis (the surface at
+    /// [`Shape::eta_range`]): 0 for a superellipsoid, an apple's dimple for 0 < a4 < 1,
+    /// infinite for a ring (a4 >= 1).
+    pub fn dimple_depth(&self) -> f64 {
+        if self.a4 >= 1.0 {
+            return f64::INFINITY;
+        }
+        self.a3 - self.surface_point(self.eta_range(), 0.0).z
+    }
 }
 
 /// sign(x)·|x|^e, the paper's convention for cos^eps and sin^eps.
@@ -293,6 +303,25 @@ pub fn parse_floats<const N: usize>(text: &str, what: &str) -> Result<[f64; N], 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A superellipsoid has no dimple and a ring a hole; an apple's dimple is deep where
+    /// its section is round and vanishes as its section squares off (a box's shallow
+    /// apple fit).
+    #[test]
+    fn an_apples_dimple_is_where_its_surface_meets_its_axis() {
+        let depth = |a4, eps1| Shape::new(0.04, 0.03, 0.05, a4, eps1, 1.0).dimple_depth();
+        assert_eq!(depth(0.0, 0.5), 0.0);
+        assert_eq!(depth(1.5, 0.5), f64::INFINITY);
+        // round section: it meets the axis at cos(eta) = -a4, z = a3·sqrt(1 - a4²)
+        let expected = 0.05 * (1.0 - (1.0f64 - 0.49).sqrt());
+        assert!(
+            (depth(0.7, 1.0) - expected).abs() < 1e-12,
+            "{}",
+            depth(0.7, 1.0)
+        );
+        // a squared-off section: under a thousandth of its height
+        assert!(depth(0.55, 0.19) < 1e-3 * 0.05, "{}", depth(0.55, 0.19));
+    }
 
     #[test]
     fn a_composed_pose_maps_a_point_as_its_two_poses_in_turn() {
