@@ -523,6 +523,23 @@ impl Prepared<'_> {
         Some(dual)
     }
 
+    /// The readings of `fitted` with its axes cycled ([`starts::axes_cycled`]) inside its
+    /// supported box, for a fit with a4 held at 0 and no size or exponent known; none
+    /// otherwise (a hole's axis is its own).
+    pub(super) fn axes_cycled(&self, fitted: &Candidate) -> Vec<Candidate> {
+        let free = |i: usize| self.known[i].is_none();
+        if self.known[3] != Some(0.0) || ![0, 1, 2, 4, 5].into_iter().all(free) {
+            return Vec::new();
+        }
+        starts::axes_cycled(fitted)
+            .into_iter()
+            .map(|mut c| {
+                c.shape = self.supported_bounds(&c).interior(&c.shape);
+                c
+            })
+            .collect()
+    }
+
     /// What the noise model takes the sensor to have seen from: the viewpoint and its
     /// frame's edges.
     pub(super) fn sight(&self) -> Option<Sight> {

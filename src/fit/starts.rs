@@ -235,6 +235,31 @@ pub fn turned_dual(candidate: &Candidate) -> Candidate {
     }
 }
 
+/// The two readings of a superellipsoid (a4 = 0) with its axes cycled: its x, y, z
+/// taken as the new z, x, y, and as the new y, z, x, its sizes with them and its two
+/// exponents exchanged. With eps1 = eps2 each is the same surface; otherwise the nearest
+/// with another axis as its z (Liu et al.'s similarity switch, EMS, CVPR 2022). A view of
+/// a box or a bar often fits a body with the wrong axis as its z about as well by least
+/// squares, a basin the search's starts along the normals' axis do not leave.
+pub fn axes_cycled(candidate: &Candidate) -> [Candidate; 2] {
+    let s = candidate.shape;
+    let r = candidate.pose.rotation;
+    let cycled = |sizes: [f64; 3], columns: [DVec3; 3]| Candidate {
+        shape: Shape::new(sizes[0], sizes[1], sizes[2], s.a4, s.eps2, s.eps1),
+        pose: Pose::new(
+            (r * DQuat::from_mat3(&DMat3::from_cols(columns[0], columns[1], columns[2])))
+                .normalize(),
+            candidate.pose.translation,
+        ),
+    };
+    [
+        // new x, y, z along the old y, z, x
+        cycled([s.a2, s.a3, s.a1], [DVec3::Y, DVec3::Z, DVec3::X]),
+        // new x, y, z along the old z, x, y
+        cycled([s.a3, s.a1, s.a2], [DVec3::Z, DVec3::X, DVec3::Y]),
+    ]
+}
+
 /// The superellipsoid (a4 = 0) with the outline of `free`, a free fit of the same
 /// cloud: its radii a1·(1 + a4) and a2·(1 + a4) (an apple's or a ring's outer
 /// radius), its height, exponents and pose. `model: auto`'s superellipsoid search starts
@@ -271,6 +296,50 @@ mod tests {
             assert_eq!(outline.pose, pose);
         }
     }
+    /// A superellipsoid's inside-outside function at world point `q` (1 on its surface).
+    fn inside_outside(c: &Candidate, q: DVec3) -> f64 {
+        let s = c.shape;
+        let p = c.pose.rotation.inverse() * (q - c.pose.translation);
+        let (e1, e2) = (s.eps1, s.eps2);
+        ((p.x / s.a1).abs().powf(2.0 / e2) + (p.y / s.a2).abs().powf(2.0 / e2)).powf(e2 / e1)
+            + (p.z / s.a3).abs().powf(2.0 / e1)
+    }
+
+    /// With equal exponents a superellipsoid with its axes cycled is the same surface;
+    /// with any, the tips of its three axes stay where they were.
+    #[test]
+    fn a_superellipsoid_with_its_axes_cycled_keeps_its_surface_or_its_tips() {
+        let pose = Pose::new(
+            DQuat::from_euler(glam::EulerRot::XYZ, 0.3, -0.5, 1.1),
+            DVec3::new(0.1, -0.2, 0.6),
+        );
+        let mut rng = crate::synth::rng(3);
+        for (eps1, eps2) in [(0.7, 0.7), (0.4, 1.3)] {
+            let c = Candidate {
+                shape: Shape::new(0.03, 0.05, 0.08, 0.0, eps1, eps2),
+                pose,
+            };
+            let surface = crate::synth::sample_surface(&c.shape, &c.pose, 200, &mut rng);
+            let tips: Vec<DVec3> = [DVec3::X * 0.03, DVec3::Y * 0.05, DVec3::Z * 0.08]
+                .into_iter()
+                .flat_map(|t| [t, -t])
+                .map(|t| pose.rotation * t + pose.translation)
+                .collect();
+            for cycled in axes_cycled(&c) {
+                assert_eq!(
+                    (cycled.shape.eps1, cycled.shape.eps2, cycled.shape.a4),
+                    (eps2, eps1, 0.0)
+                );
+                assert_ne!(cycled.shape.a3, c.shape.a3);
+                let same_surface = eps1 == eps2;
+                for q in tips.iter().chain(surface.iter().filter(|_| same_surface)) {
+                    let f = inside_outside(&cycled, *q);
+                    assert!((f - 1.0).abs() < 1e-6, "{eps1} {eps2}: {f}");
+                }
+            }
+        }
+    }
+
     use crate::model::superellipse_norm;
 
     /// The radius of a candidate's mean superellipse along a world direction in its

@@ -9,7 +9,8 @@
 //!    basins go on (a cloud with no viewpoint that is not all round its object is ranked
 //!    by its points' distances alone: where on the surface they fell is unknown).
 //! 2. Round 2: those, and the other reading of the best one's top view
-//!    ([`starts::turned_dual`]), refined by the estimator the cloud's noise calls for
+//!    ([`starts::turned_dual`]) and with a4 held at 0 the best one with its axes cycled
+//!    ([`starts::axes_cycled`]), refined by the estimator the cloud's noise calls for
 //!    ([`noisy`]): a few likelihood iterations on [`ROUND2_POINTS`] points on a noisy
 //!    cloud, least squares under a Cauchy loss on a precise one.
 //! 3. The likeliest, and any within [`CLOSE_MARGIN`] of it, converge on the stage-2

@@ -149,7 +149,8 @@ fn sample_of(p: &Prepared, points: &[DVec3], all_round: bool) -> Sample {
 /// Round 2: round 1's kept candidates, and the other reading of the best one's top view,
 /// refined by the estimator the cloud's noise calls for (one estimator for all of a
 /// cloud's candidates, so that they are compared by one measure: the likelihood where the
-/// noise is wide against the likeliest candidate's section or any kept ring's), scored on
+/// noise is wide against the likeliest candidate's section or any kept ring's, or with a4
+/// held at 0 any kept candidate's), scored on
 /// [`ROUND2_POINTS`] of the stage-2 sample. A cloud whose likeliest refinement blurs it
 /// by more than [`MAX_SIGMA_GROWTH`] times the noise it shows is refined by least squares
 /// instead. A cloud of `by_likelihood` goes the likelihood way whatever its noise. A
@@ -205,11 +206,13 @@ pub(super) fn round2(
             // the scatter reads a precise thin ring's curvature as noise)
             let noise = p.scatter().map_or(best.sigma, |s| s.min(best.sigma));
             // (judged on every ring kept too: least squares reads a thin section blurred
-            // by the noise as a thick one, which then looks precise)
+            // by the noise as a thick one, which then looks precise; and a superellipsoid
+            // fit's every candidate, a slab or a rod blurred likewise)
+            let superellipsoid = p.known[3] == Some(0.0);
             let rings = first.kept[cloud]
                 .iter()
                 .map(|k| &k.candidate)
-                .filter(|c| c.shape.a4 > 1.0);
+                .filter(|c| c.shape.a4 > 1.0 || superellipsoid);
             (by_likelihood[cloud] && p.noise_model
                 || std::iter::once(&best.candidate)
                     .chain(rings)
@@ -265,7 +268,15 @@ fn refine_precise(
             .first()
             .filter(|_| !p.skip.contains(&Stage::DualReading))
             .and_then(|best| p.turned_dual(&best.candidate));
-        for c in kept[cloud].iter().map(|k| k.candidate).chain(dual) {
+        let cycled = kept[cloud]
+            .first()
+            .map_or(Vec::new(), |best| p.axes_cycled(&best.candidate));
+        for c in kept[cloud]
+            .iter()
+            .map(|k| k.candidate)
+            .chain(dual)
+            .chain(cycled)
+        {
             candidates.push(c);
             sets.push(cloud);
         }
@@ -326,22 +337,22 @@ fn refine_noisy(
         refined.push(r);
     }
     let best = choose(&refined);
-    if let Some(dual) = p
+    let dual = p
         .turned_dual(&best.candidate)
-        .filter(|_| !p.skip.contains(&Stage::DualReading))
-    {
-        let dual = robust_candidate(
+        .filter(|_| !p.skip.contains(&Stage::DualReading));
+    for other in dual.into_iter().chain(p.axes_cycled(&best.candidate)) {
+        let other = robust_candidate(
             evaluator,
             p,
             mid,
             cloud,
             Scored {
-                candidate: dual,
+                candidate: other,
                 ..best
             },
             ROUND1_SHORTFALL,
         )?;
-        refined.push(likelihood_candidate(p, mid, dual, noise).unwrap_or(dual));
+        refined.push(likelihood_candidate(p, mid, other, noise).unwrap_or(other));
     }
     Ok(refined)
 }
