@@ -58,7 +58,8 @@ struct OtherFit {
     ms: f64,
 }
 
-/// Right (chamfer under the bound), the chamfer, and the time of each method's fit.
+/// One method's fits: how many were right (chamfer under the bound) of how many, full
+/// clouds and single views apart, and their times.
 struct Tally {
     name: &'static str,
     right: [usize; 2],

@@ -296,13 +296,11 @@ mod tests {
             assert_eq!(outline.pose, pose);
         }
     }
-    /// A superellipsoid's inside-outside function at world point `q` (1 on its surface).
+
+    /// A candidate's inside-outside function at world point `q` (1 on its surface).
     fn inside_outside(c: &Candidate, q: DVec3) -> f64 {
-        let s = c.shape;
-        let p = c.pose.rotation.inverse() * (q - c.pose.translation);
-        let (e1, e2) = (s.eps1, s.eps2);
-        ((p.x / s.a1).abs().powf(2.0 / e2) + (p.y / s.a2).abs().powf(2.0 / e2)).powf(e2 / e1)
-            + (p.z / s.a3).abs().powf(2.0 / e1)
+        c.shape
+            .inside_outside(c.pose.rotation.inverse() * (q - c.pose.translation))
     }
 
     /// With equal exponents a superellipsoid with its axes cycled is the same surface;
