@@ -180,9 +180,6 @@ pub fn choose(
     let both_ms = holed.timing_ms.total.max(genus0.timing_ms.total);
     // a free fit that came out at a4 = 0 is a superellipsoid too: the better of the two
     // then stands for that model, and there is no supertoroid to weigh against it
-    // (and a free fit with no hole whose dimple the noise hides is no evidence of one,
-    // whatever its BIC: an apple's a4 bends its profile to the sensor's noise)
-    let dimple_unseen = holed.shape.dimple_depth() < DIMPLE_SIGMAS * holed.quality.noise_sigma;
     let (supertoroid, superellipsoid, mut chosen, kind, chosen_by) =
         if is_superellipsoid(&holed.shape) {
             let (best, value) = if holed_bic < genus0_bic {
@@ -192,6 +189,10 @@ pub fn choose(
             };
             (None, value, best, Model::Superellipsoid, "bic")
         } else {
+            // (a free fit with no hole whose dimple the noise hides is no evidence of one,
+            // whatever its BIC: an apple's a4 bends its profile to the sensor's noise)
+            let dimple_unseen =
+                holed.shape.dimple_depth() < DIMPLE_SIGMAS * holed.quality.noise_sigma;
             let (kind, chosen_by) = if genus0_bic < holed_bic + MIN_EVIDENCE {
                 (Model::Superellipsoid, "bic")
             } else if dimple_unseen {

@@ -523,12 +523,18 @@ impl Prepared<'_> {
         Some(dual)
     }
 
+    /// Whether this is a superellipsoid's fit: a4 held at 0 (`model: superellipsoid`, or
+    /// `auto`'s second fit).
+    pub(super) fn holds_a4_at_zero(&self) -> bool {
+        self.known[3] == Some(0.0)
+    }
+
     /// The readings of `fitted` with its axes cycled ([`starts::axes_cycled`]) inside its
     /// supported box, for a fit with a4 held at 0 and no size or exponent known; none
     /// otherwise (a hole's axis is its own).
     pub(super) fn axes_cycled(&self, fitted: &Candidate) -> Vec<Candidate> {
         let free = |i: usize| self.known[i].is_none();
-        if self.known[3] != Some(0.0) || ![0, 1, 2, 4, 5].into_iter().all(free) {
+        if !self.holds_a4_at_zero() || ![0, 1, 2, 4, 5].into_iter().all(free) {
             return Vec::new();
         }
         starts::axes_cycled(fitted)

@@ -208,14 +208,14 @@ pub(super) fn round2(
             // (judged on every ring kept too: least squares reads a thin section blurred
             // by the noise as a thick one, which then looks precise; and a superellipsoid
             // fit's every candidate, a slab or a rod blurred likewise)
-            let superellipsoid = p.known[3] == Some(0.0);
-            let rings = first.kept[cloud]
+            let superellipsoid = p.holds_a4_at_zero();
+            let judged = first.kept[cloud]
                 .iter()
                 .map(|k| &k.candidate)
                 .filter(|c| c.shape.a4 > 1.0 || superellipsoid);
             (by_likelihood[cloud] && p.noise_model
                 || std::iter::once(&best.candidate)
-                    .chain(rings)
+                    .chain(judged)
                     .any(|c| noisy(p, c, noise)))
             .then_some(noise)
         })
@@ -340,20 +340,28 @@ fn refine_noisy(
     let dual = p
         .turned_dual(&best.candidate)
         .filter(|_| !p.skip.contains(&Stage::DualReading));
+    // the best one's other readings, each after least squares in its own basin, then
+    // refined side by side as the kept ones are
+    let mut others = Vec::new();
     for other in dual.into_iter().chain(p.axes_cycled(&best.candidate)) {
-        let other = robust_candidate(
+        let scored = Scored {
+            candidate: other,
+            ..best
+        };
+        others.push(robust_candidate(
             evaluator,
             p,
             mid,
             cloud,
-            Scored {
-                candidate: other,
-                ..best
-            },
+            scored,
             ROUND1_SHORTFALL,
-        )?;
-        refined.push(likelihood_candidate(p, mid, other, noise).unwrap_or(other));
+        )?);
     }
+    refined.par_extend(
+        others
+            .into_par_iter()
+            .map(|other| likelihood_candidate(p, mid, other, noise).unwrap_or(other)),
+    );
     Ok(refined)
 }
 
