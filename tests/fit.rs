@@ -968,6 +968,58 @@ fn a_thin_ring_with_few_noisy_points_is_flagged_uncertain() {
     }
 }
 
+/// A free fit (`model: supertoroid`, a4 not held) that comes out a superellipsoid has
+/// a4 on its bound at 0: its sizes' and exponents' errors are taken with a4 held there,
+/// and a4's own error is measured against 1, the least a4 with a hole (against the
+/// rounding the solver keeps above 0 it read as billions of percent and warned every
+/// such fit). A whole box leaves no doubt that it has no hole; a tall roll seen from the
+/// side and fitted without its hole (`suite::broad`'s view 2000029) does.
+#[test]
+fn a_free_fit_that_comes_out_a_superellipsoid_is_warned_only_where_a_hole_could_be() {
+    use supertoroid::model::{Pose, Shape};
+    let shape = Shape::new(0.04, 0.03, 0.05, 0.0, 0.3, 0.3);
+    let mut rng = supertoroid::synth::rng(11);
+    let mut points = supertoroid::synth::sample_surface(&shape, &Pose::default(), 2000, &mut rng);
+    supertoroid::synth::add_noise(&mut points, 0.0005, &mut rng);
+    let mut evaluator = CpuEvaluator::new();
+    let report = fit(&mut evaluator, &points, &FitOptions::default()).unwrap();
+    assert!(report.shape.a4 < 0.01, "{:?}", report.shape);
+    let errors = report.quality.standard_errors.as_ref().unwrap();
+    assert!(errors.a4 < 0.05 && errors.sizes < 0.01, "{errors:?}");
+    assert!(
+        !report.warnings.iter().any(|w| w.starts_with("uncertain")),
+        "{:?}",
+        report.warnings
+    );
+    // with `model: auto` the choice weighs the hole: the free fit standing for the
+    // superellipsoid carries no a4 error, as the superellipsoid fit does not
+    let auto = FitOptions {
+        model: supertoroid::fit::Model::Auto,
+        ..Default::default()
+    };
+    let report = fit(&mut evaluator, &points, &auto).unwrap();
+    assert_eq!(report.quality.standard_errors.as_ref().unwrap().a4, 0.0);
+    let seed = 2_000_029;
+    let roll = supertoroid::suite::broad::view(seed);
+    let options = FitOptions {
+        seed,
+        ..Default::default()
+    };
+    let report = fit(&mut evaluator, &roll.points, &options).unwrap();
+    assert!(
+        roll.shape.a4 > 1.0 && report.shape.a4 < 0.01,
+        "{:?}",
+        report.shape
+    );
+    let errors = report.quality.standard_errors.as_ref().unwrap();
+    assert!(errors.a4 >= 0.05 && errors.a4 < 1.0, "{errors:?}");
+    assert!(
+        report.warnings.iter().any(|w| w.starts_with("uncertain")),
+        "{:?}",
+        report.warnings
+    );
+}
+
 /// Told where the sensor was, a fit can be drawn from there (`fit::coverage`): the true
 /// shape of a single view shows the sensor surface that the points cover, a body grown
 /// into the side the sensor did not see shows it surface without points.

@@ -129,6 +129,22 @@ impl ModelOut {
     }
 }
 
+/// A free fit that came out a superellipsoid, standing for that model: its a4 held at 0
+/// as the superellipsoid fit's is, so its a4 error (whether the points could hold a
+/// hole, which the choice has weighed) and the warning it raised go.
+fn with_a4_held(mut report: FitReport) -> FitReport {
+    if let Some(errors) = report.quality.standard_errors.as_mut() {
+        errors.a4 = 0.0;
+        report
+            .warnings
+            .retain(|w| !w.starts_with(super::uncertainty::WARNING_PREFIX));
+        report
+            .warnings
+            .splice(0..0, super::uncertainty::warning(errors));
+    }
+    report
+}
+
 /// The better of a cloud's two fits by BIC, its report's `model` saying so; its time is
 /// the batch's that made both, and the choice's. Seen from a viewpoint, the cloud is
 /// scored as what it saw within `field` (its frame's edges), where given.
@@ -183,7 +199,7 @@ pub fn choose(
     let (supertoroid, superellipsoid, mut chosen, kind, chosen_by) =
         if is_superellipsoid(&holed.shape) {
             let (best, value) = if holed_bic < genus0_bic {
-                (holed, holed_bic)
+                (with_a4_held(holed), holed_bic)
             } else {
                 (genus0, genus0_bic)
             };
