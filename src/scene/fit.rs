@@ -217,6 +217,7 @@ pub fn assemble(
         window,
         ..
     } = segmentation;
+    let (objects, fits) = super::pieces::join_pieces(objects, fits);
     let objects = objects
         .into_iter()
         .zip(fits)

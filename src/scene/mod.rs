@@ -8,8 +8,10 @@
 //! * [`objects`]: a whole frame's table and the objects standing on it, split apart by
 //!   Euclidean clustering on a k-d tree.
 //! * [`fit`]: every object of a frame fitted in one batch ([`fit::fit_scene`]).
+//! * [`pieces`]: pieces of one object the clustering split apart, joined after the fits.
 
 pub mod fit;
 pub mod objects;
+pub mod pieces;
 pub mod plane;
 pub mod table;
