@@ -29,32 +29,32 @@ pub fn join_pieces<E>(
     segments: Vec<Segment>,
     fits: Vec<Result<FitReport, E>>,
 ) -> (Vec<Segment>, Vec<Result<FitReport, E>>) {
+    // larger first: an object is known to be no piece before its own pieces are sought
+    let mut order: Vec<usize> = (0..segments.len()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(segments[i].points.len()));
     let mut owner: Vec<Option<usize>> = vec![None; segments.len()];
-    for (b, piece) in segments.iter().enumerate() {
-        owner[b] = (0..segments.len()).find(|&a| {
-            a != b
-                && owner[a].is_none()
-                && segments[a].points.len() > piece.points.len()
+    for (rank, &b) in order.iter().enumerate() {
+        let piece = &segments[b].points;
+        owner[b] = order[..rank].iter().copied().find(|&a| {
+            owner[a].is_none()
+                && segments[a].points.len() > piece.len()
                 && fits[a]
                     .as_ref()
-                    .is_ok_and(|fit| share_on(fit, &piece.points) >= PIECE_SHARE)
+                    .is_ok_and(|fit| share_on(fit, piece) >= PIECE_SHARE)
         });
     }
     let mut joined: Vec<(Segment, Result<FitReport, E>)> = Vec::new();
     let mut index = vec![usize::MAX; segments.len()];
-    let pieces: Vec<(usize, Segment)> = segments
-        .into_iter()
-        .zip(fits)
-        .enumerate()
-        .filter_map(|(i, (segment, fit))| match owner[i] {
-            Some(a) => Some((a, segment)),
+    let mut pieces: Vec<(usize, Segment)> = Vec::new();
+    for (i, (segment, fit)) in segments.into_iter().zip(fits).enumerate() {
+        match owner[i] {
+            Some(a) => pieces.push((a, segment)),
             None => {
                 index[i] = joined.len();
                 joined.push((segment, fit));
-                None
             }
-        })
-        .collect();
+        }
+    }
     for (a, piece) in pieces {
         let (segment, _) = &mut joined[index[a]];
         segment.points.extend(piece.points);
@@ -77,4 +77,55 @@ fn share_on(fit: &FitReport, points: &[glam::DVec3]) -> f64 {
         .filter(|p| meridian_distance(shape, pose.to_canonical(***p)).distance <= within)
         .count();
     on as f64 / tested.len().max(1) as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::CpuEvaluator;
+    use crate::fit::{FitOptions, fit};
+    use crate::model::{Pose, Shape};
+    use glam::{DQuat, DVec3};
+
+    fn segment(points: Vec<DVec3>) -> Segment {
+        let pixels = (0..points.len() as u32).map(|i| (i, 0)).collect();
+        Segment {
+            points,
+            pixels,
+            seen_through: Vec::new(),
+        }
+    }
+
+    /// A ring's points split in two (an arc of a third apart) and a box beside it, given
+    /// smallest first: the ring's third lies on the fit of the rest and joins it, refused
+    /// or not;
+    /// the box, on no other fit, stays; the order stays.
+    #[test]
+    fn a_piece_on_a_larger_objects_fit_joins_it_and_another_object_does_not() {
+        let mut rng = crate::synth::rng(4);
+        let ring = Shape::new(0.04, 0.04, 0.01, 2.0, 1.0, 1.0);
+        let mut points = crate::synth::sample_surface(&ring, &Pose::default(), 3000, &mut rng);
+        crate::synth::add_noise(&mut points, 0.0003, &mut rng);
+        // (by polar angle: the piece is one arc of the ring)
+        let (piece, rest): (Vec<DVec3>, Vec<DVec3>) =
+            points.into_iter().partition(|p| p.y.atan2(p.x) > 1.2);
+        let box_shape = Shape::new(0.03, 0.02, 0.04, 0.0, 0.3, 0.3);
+        let beside = Pose::new(DQuat::IDENTITY, DVec3::new(0.3, 0.0, 0.0));
+        let boxed = crate::synth::sample_surface(&box_shape, &beside, 1500, &mut rng);
+        let mut evaluator = CpuEvaluator::new();
+        let mut fitted = |points: &[DVec3]| fit(&mut evaluator, points, &FitOptions::default());
+        let fits = vec![
+            Err(()),
+            fitted(&boxed).map_err(|_| ()),
+            fitted(&rest).map_err(|_| ()),
+        ];
+        assert!(fits[1].is_ok() && fits[2].is_ok());
+        let sizes = [piece.len(), boxed.len(), rest.len()];
+        assert!(sizes[0] < sizes[1] && sizes[1] < sizes[2], "{sizes:?}");
+        let (joined, fits) = join_pieces(vec![segment(piece), segment(boxed), segment(rest)], fits);
+        let counts: Vec<usize> = joined.iter().map(|s| s.points.len()).collect();
+        assert_eq!(counts, vec![sizes[1], sizes[0] + sizes[2]]);
+        assert_eq!(joined[1].pixels.len(), sizes[0] + sizes[2]);
+        assert!(fits.iter().all(|f| f.is_ok()));
+    }
 }
