@@ -98,8 +98,7 @@ mod tests {
 
     /// A ring's points split in two (an arc of a third apart) and a box beside it, given
     /// smallest first: the ring's third lies on the fit of the rest and joins it, refused
-    /// or not;
-    /// the box, on no other fit, stays; the order stays.
+    /// or not; the box, on no other fit, stays; the order stays.
     #[test]
     fn a_piece_on_a_larger_objects_fit_joins_it_and_another_object_does_not() {
         let mut rng = crate::synth::rng(4);
