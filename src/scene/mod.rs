@@ -6,7 +6,7 @@
 //!   largest connected region of pixels above it; a box that holds nothing but the table
 //!   is refused.
 //! * [`objects`]: a whole frame's table and the objects standing on it, split apart by
-//!   Euclidean clustering on a k-d tree.
+//!   Euclidean clustering on a grid of cells.
 //! * [`fit`]: every object of a frame fitted in one batch ([`fit::fit_scene`]).
 //! * [`pieces`]: pieces of one object the clustering split apart, joined after the fits.
 
