@@ -9,7 +9,7 @@
 use glam::DVec3;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
 use std::num::NonZeroUsize;
 
 /// The neighbour whose distance measures how isolated a point is.
@@ -62,7 +62,7 @@ pub fn without_isolated(points: &[DVec3]) -> Option<Vec<DVec3>> {
     let limit = ISOLATION_FACTOR * median;
     let side = limit / 3f64.sqrt();
     let cell = |p: &DVec3| (*p / side).floor().as_i64vec3().to_array();
-    let mut occupancy: HashMap<[i64; 3], usize> = HashMap::new();
+    let mut occupancy: FxHashMap<[i64; 3], usize> = FxHashMap::default();
     for p in points {
         *occupancy.entry(cell(p)).or_default() += 1;
     }

@@ -12,9 +12,8 @@ use super::plane::{PlaneFit, fit_plane};
 use super::table::{Pixels, TABLE_TOLERANCE};
 use crate::model::Plane;
 use glam::DVec3;
+use rustc_hash::FxHashMap;
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
 
 /// The most points the plane's RANSAC looks at (an even stride of the frame).
 const PLANE_POINTS: usize = 20_000;
@@ -358,33 +357,9 @@ pub fn euclidean_clusters(points: &[DVec3], gap: f64) -> Vec<Vec<usize>> {
     clusters
 }
 
-/// Cells by their grid position.
-type CellMap = HashMap<(i64, i64, i64), usize, BuildHasherDefault<CellHasher>>;
-
-/// FxHash's multiplicative hash over a cell's three coordinates (the standard library's
-/// SipHash, built against adversarial keys, was a third of the clustering's time).
-#[derive(Default)]
-struct CellHasher(u64);
-
-impl Hasher for CellHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(u64::from(b));
-        }
-    }
-
-    fn write_u64(&mut self, word: u64) {
-        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
-    }
-
-    fn write_i64(&mut self, word: i64) {
-        self.write_u64(word as u64);
-    }
-}
+/// Cells by their grid position, hashed by FxHash (the standard library's SipHash, built
+/// against adversarial keys, was a third of the clustering's time).
+type CellMap = FxHashMap<(i64, i64, i64), usize>;
 
 /// The cell offsets up to two apart along each axis, each pair of opposite ones once (the
 /// 62 lexicographically after zero).
