@@ -307,10 +307,8 @@ pub fn euclidean_clusters(points: &[DVec3], gap: f64) -> Vec<Vec<usize>> {
         return (0..points.len()).map(|i| vec![i]).collect();
     }
     let side = gap / 3f64.sqrt();
-    let cell_of = |p: &DVec3| {
-        let c = (*p / side).floor();
-        (c.x as i64, c.y as i64, c.z as i64)
-    };
+    // (keyed as `fit::isolated` keys its occupancy grid)
+    let cell_of = |p: &DVec3| (*p / side).floor().as_i64vec3().to_array();
     let mut cells: CellMap = CellMap::default();
     let mut members: Vec<Vec<usize>> = Vec::new();
     let mut cell_of_point = Vec::with_capacity(points.len());
@@ -325,9 +323,9 @@ pub fn euclidean_clusters(points: &[DVec3], gap: f64) -> Vec<Vec<usize>> {
     }
     let mut roots = UnionFind::new(members.len());
     let gap2 = gap * gap;
-    for (&(x, y, z), &a) in &cells {
-        for (dx, dy, dz) in HALF_NEIGHBOURHOOD {
-            let Some(&b) = cells.get(&(x + dx, y + dy, z + dz)) else {
+    for (&[x, y, z], &a) in &cells {
+        for [dx, dy, dz] in HALF_NEIGHBOURHOOD {
+            let Some(&b) = cells.get(&[x + dx, y + dy, z + dz]) else {
                 continue;
             };
             if roots.find(a) == roots.find(b) {
@@ -359,12 +357,12 @@ pub fn euclidean_clusters(points: &[DVec3], gap: f64) -> Vec<Vec<usize>> {
 
 /// Cells by their grid position, hashed by FxHash (the standard library's SipHash, built
 /// against adversarial keys, was a third of the clustering's time).
-type CellMap = FxHashMap<(i64, i64, i64), usize>;
+type CellMap = FxHashMap<[i64; 3], usize>;
 
 /// The cell offsets up to two apart along each axis, each pair of opposite ones once (the
 /// 62 lexicographically after zero).
-const HALF_NEIGHBOURHOOD: [(i64, i64, i64); 62] = {
-    let mut out = [(0, 0, 0); 62];
+const HALF_NEIGHBOURHOOD: [[i64; 3]; 62] = {
+    let mut out = [[0; 3]; 62];
     let mut k = 0;
     let mut dx = -2;
     while dx <= 2 {
@@ -373,7 +371,7 @@ const HALF_NEIGHBOURHOOD: [(i64, i64, i64); 62] = {
             let mut dz = -2;
             while dz <= 2 {
                 if dx > 0 || (dx == 0 && (dy > 0 || (dy == 0 && dz > 0))) {
-                    out[k] = (dx, dy, dz);
+                    out[k] = [dx, dy, dz];
                     k += 1;
                 }
                 dz += 1;
