@@ -4,15 +4,21 @@
 //!
 //! Success by the suite's rule, per family and in all, with the fit's median and p95
 //! time, and how many wrong and right fits carry a warning. For each miss it also says whether the fit's own estimator started at the truth
-//! (`ground_truth::model_from_truth`) misses too: a miss it shares is the estimator's, not
-//! the search's.
+//! (`ground_truth::model_from_truth`) misses too, and how much likelier the truth's basin
+//! is than the fit's under the fit's own noise model (`ground_truth::basin_gap`): a miss in
+//! a less likely basin than the truth's is the search's, one at least as likely as the
+//! truth's is the estimator's.
 //!
 //! `cargo run --release --example broad_views -- [CASES] [FIRST_SEED]`
 
 use supertoroid::eval::CpuEvaluator;
 use supertoroid::fit::{FitOptions, fit};
 use supertoroid::suite::broad::{FAMILIES, view};
-use supertoroid::suite::ground_truth::{TruthPoints, compare, model_from_truth};
+use supertoroid::suite::ground_truth::{TruthPoints, basin_gap, compare, model_from_truth};
+
+/// A gap in mean log-likelihood per point above which the truth's basin counts as the
+/// likelier (the refinements stop at steps of 1e-4).
+const BASIN_GAP: f64 = 1e-3;
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -25,6 +31,8 @@ fn main() {
     let mut counts = [0usize; 4];
     let mut refused = 0;
     let mut beyond_estimator = 0;
+    // misses in a basin less likely than the truth's, at least as likely, and unscored
+    let mut by_basin = [0usize; 3];
     // [wrong, right] fits, and of them those with a warning
     let mut judged = [0usize; 2];
     let mut warned = [0usize; 2];
@@ -47,7 +55,8 @@ fn main() {
         };
         times.push(report.timing_ms.total);
         let (shape, pose) = &report.fitted;
-        let success = compare((&case.shape, &case.pose), (shape, pose)).success();
+        let errors = compare((&case.shape, &case.pose), (shape, pose));
+        let success = errors.success();
         judged[usize::from(success)] += 1;
         warned[usize::from(success)] += usize::from(!report.warnings.is_empty());
         if success {
@@ -57,8 +66,14 @@ fn main() {
         let estimator_misses =
             !model_from_truth(&case, TruthPoints::All, true, &options).is_some_and(|e| e.success());
         beyond_estimator += usize::from(estimator_misses);
+        let gap = basin_gap(&case, (shape, pose), report.quality.noise_sigma, &options);
+        by_basin[match gap {
+            Some(g) if g > BASIN_GAP => 0,
+            Some(_) => 1,
+            None => 2,
+        }] += 1;
         println!(
-            "  seed {seed} ({}) missed{}: truth {:.4?}, fit {:.4?}; warnings {:?}",
+            "  seed {seed} ({}) missed{}: truth {:.4?}, fit {:.4?}; {errors:.3?}; truth's basin likelier by {} nats a point; estimator {}; warnings {:?}",
             FAMILIES[family],
             if estimator_misses {
                 " (so does the estimator from the truth)"
@@ -67,6 +82,8 @@ fn main() {
             },
             case.shape.to_array(),
             shape.to_array(),
+            gap.map_or("(unscored)".into(), |g| format!("{g:.4}")),
+            report.search.as_ref().map_or("-", |s| s.estimator.as_str()),
             report.warnings
         );
     }
@@ -85,6 +102,10 @@ fn main() {
     );
     println!(
         "  of the misses, {beyond_estimator} are missed by the estimator started at the truth too"
+    );
+    println!(
+        "  of the misses, {} lie in a basin less likely than the truth's (the search's), {} in one at least as likely (the estimator's), {} lost the hole the model scores",
+        by_basin[0], by_basin[1], by_basin[2]
     );
     println!(
         "  warned: {} of {} wrong fits, {} of {} right ones",

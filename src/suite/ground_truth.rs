@@ -281,3 +281,43 @@ pub fn recovered_from_truth(
     model_from_truth(case, points, finely, options)
         .map_or(case.noise == 0.0, |errors| errors.success())
 }
+
+/// How much likelier the truth's basin is than a fit's under the fit's own noise model:
+/// the mean log-likelihood per point of [`likelihood::refine_finely`] started at the
+/// truth, less that of the same refinement started at the fit (every point of the cloud,
+/// the fit's noise estimate `sigma` in world units, seen from the case's camera). Above
+/// zero, a fit in another basin than the truth's is the search's miss: the objective
+/// prefers the truth's, the search never got there. At or below zero the fit is at least
+/// as likely, and a miss is the estimator's. None for a noise-free case and where either
+/// start is not a shape the model covers (a4 <= 1: a fit that lost its hole).
+pub fn basin_gap(
+    case: &Case,
+    fitted: (&Shape, &Pose),
+    sigma: f64,
+    options: &FitOptions,
+) -> Option<f64> {
+    if case.noise == 0.0 {
+        return None;
+    }
+    let norm = Normalization::of(&case.points);
+    let points = norm.points(&case.points);
+    let limits = likelihood::Limits {
+        bounds: options.bounds(),
+        fixed_shape: [false; 6],
+        fixed_axis: false,
+    };
+    let from = |start| {
+        likelihood::refine_finely(
+            &points,
+            &start,
+            sigma / norm.scale,
+            LIKELIHOOD_OUTLIER_WEIGHT,
+            case.viewpoint.map(|v| Sight::at(norm.point(v))),
+            &limits,
+            2 * likelihood::MAX_ITERATIONS,
+        )
+        .map(|refined| refined.objective)
+    };
+    // (objectives are negative mean log-likelihoods: lower is likelier)
+    Some(from(norm.candidate(fitted.0, fitted.1))? - from(norm.candidate(&case.shape, &case.pose))?)
+}
