@@ -216,6 +216,15 @@ pub enum TruthPoints {
     Stage2Sample(u64),
 }
 
+/// The likelihood's limits with nothing held: the options' bounds alone.
+fn free_limits(options: &FitOptions) -> likelihood::Limits {
+    likelihood::Limits {
+        bounds: options.bounds(),
+        fixed_shape: [false; 6],
+        fixed_axis: false,
+    }
+}
+
 /// The fit's own estimator started at the answer: the noise model (`fit::likelihood`)
 /// refined from the true parameters and the true noise sigma of a noisy case, judged by
 /// the success rule. A case that fails here fails because the estimator's optimum near
@@ -245,11 +254,7 @@ pub fn model_from_truth(
     }
     let truth = norm.candidate(&case.shape, &case.pose);
     let sigma = case.noise * case.shape.size() / norm.scale;
-    let limits = likelihood::Limits {
-        bounds: options.bounds(),
-        fixed_shape: [false; 6],
-        fixed_axis: false,
-    };
+    let limits = free_limits(options);
     let refine: likelihood::Refine = if finely {
         likelihood::refine_finely
     } else {
@@ -301,11 +306,7 @@ pub fn basin_gap(
     }
     let norm = Normalization::of(&case.points);
     let points = norm.points(&case.points);
-    let limits = likelihood::Limits {
-        bounds: options.bounds(),
-        fixed_shape: [false; 6],
-        fixed_axis: false,
-    };
+    let limits = free_limits(options);
     let from = |start| {
         likelihood::refine_finely(
             &points,
