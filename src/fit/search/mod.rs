@@ -12,8 +12,7 @@
 //!    ([`starts::turned_dual`]) and with a4 held at 0 the best one with its axes cycled
 //!    ([`starts::axes_cycled`]), refined by the estimator the cloud's noise calls for
 //!    ([`noisy`]): a few likelihood iterations on [`ROUND2_POINTS`] points on a noisy
-//!    cloud, least squares under a Cauchy loss on a precise one; on a noisy cloud the
-//!    [`ROUND2_LEADERS`] likeliest in distinct basins get [`LEADERS_ITERATIONS`] more.
+//!    cloud, least squares under a Cauchy loss on a precise one.
 //! 3. The likeliest, and any within [`CLOSE_MARGIN`] of it, converge on the stage-2
 //!    sample; the most likely stands, and goes on to the polish ([`polish`]).
 //!
@@ -71,14 +70,6 @@ pub const REFINE_ITERATIONS: usize = 30;
 /// Likelihood iterations and points each round-2 candidate gets before the choice.
 pub const ROUND2_ITERATIONS: usize = 5;
 pub const ROUND2_POINTS: usize = 400;
-/// Round-2 candidates of a noisy cloud, the likeliest in distinct basins, that go on
-/// for [`LEADERS_ITERATIONS`] more likelihood iterations before the choice. Measured
-/// against none, interleaved case by case: broadened views (camera frame, no options)
-/// 252 -> 263 of 320 (12 won, 1 lost; two sets of 160), the suite's 90 cases of one set
-/// unchanged; views' median +15 ms, full clouds' +7 ms. All candidates at 15 iterations
-/// gained 13 for +27 ms and +21 ms; the leaders at 25 more iterations no more than at 10.
-pub const ROUND2_LEADERS: usize = 2;
-pub const LEADERS_ITERATIONS: usize = 10;
 /// Iterations of the first round of the robust least squares.
 pub const ROBUST_FIRST_ITERATIONS: usize = 15;
 /// Iterations the first round adds for a candidate straight from round 1 (not yet
@@ -530,36 +521,6 @@ fn likelihood_candidate(p: &Prepared, sample: &Sample, c: Scored, noise: f64) ->
         iterations: c.iterations + r.iterations,
         modelled: true,
         overreaches: p.overreaches(&r.candidate, &p.stage2_pts),
-    })
-}
-
-/// A noisy cloud's round-2 candidate refined by the likelihood for `iterations` more,
-/// from its own noise estimate; none where the refinement collapses.
-fn continued_candidate(
-    p: &Prepared,
-    sample: &Sample,
-    c: Scored,
-    iterations: usize,
-) -> Option<Scored> {
-    let start = c.sigma.max(REFINE_SIGMA_FLOOR);
-    let r = objective::refine_on(
-        &sample.data(),
-        &c.candidate,
-        start,
-        &p.likelihood_limits(&c.candidate),
-        iterations,
-        objective::normaliser::COARSE,
-    );
-    if collapsed(&r, start) {
-        return None;
-    }
-    Some(Scored {
-        candidate: r.candidate,
-        sigma: r.sigma,
-        score: r.objective,
-        iterations: c.iterations + r.iterations,
-        overreaches: p.overreaches(&r.candidate, &p.stage2_pts),
-        ..c
     })
 }
 

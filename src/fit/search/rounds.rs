@@ -362,29 +362,7 @@ fn refine_noisy(
             .into_par_iter()
             .map(|other| likelihood_candidate(p, mid, other, noise).unwrap_or(other)),
     );
-    continue_leaders(p, mid, &mut refined);
     Ok(refined)
-}
-
-/// The [`ROUND2_LEADERS`] likeliest of a noisy cloud's round-2 candidates, in distinct
-/// basins, refined by the likelihood for [`LEADERS_ITERATIONS`] more before the choice
-/// (successive halving): after round 2's few iterations a candidate still thinning its
-/// section scores below another reading it will end likelier than.
-fn continue_leaders(p: &Prepared, mid: &Sample, refined: &mut [Scored]) {
-    let modelled = refined.iter().filter(|c| c.modelled).copied().collect();
-    let leaders = most_likely_distinct(modelled, ROUND2_LEADERS);
-    let continued: Vec<Option<Scored>> = leaders
-        .par_iter()
-        .map(|c| continued_candidate(p, mid, *c, LEADERS_ITERATIONS))
-        .collect();
-    for (leader, continued) in leaders.iter().zip(continued) {
-        if let (Some(slot), Some(continued)) = (
-            refined.iter_mut().find(|r| r.candidate == leader.candidate),
-            continued,
-        ) {
-            *slot = continued;
-        }
-    }
 }
 
 /// Each cloud's fit: its likeliest round-2 candidate, converged on the stage-2 sample
