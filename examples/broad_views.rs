@@ -3,11 +3,12 @@
 //! the clouds: in the camera's frame, no options.
 //!
 //! Success by the suite's rule, per family and in all, with the fit's median and p95
-//! time, and how many wrong and right fits carry a warning. For each miss it also says whether the fit's own estimator started at the truth
-//! (`ground_truth::model_from_truth`) misses too, and how much likelier the truth's basin
-//! is than the fit's under the fit's own noise model (`ground_truth::basin_gap`): a miss in
-//! a less likely basin than the truth's is the search's, one at least as likely as the
-//! truth's is the estimator's.
+//! time, and how many wrong and right fits carry a warning. For each miss it also says
+//! whether the fit's own estimator started at the truth (`ground_truth::model_from_truth`)
+//! misses too, and how much likelier the truth's basin is than the fit's under the fit's
+//! own noise model (`ground_truth::basin_gap`): a miss in a less likely basin than the
+//! truth's is the search's, one at least as likely as the truth's is the estimator's, and
+//! one without a hole is unscored (the grid model needs one).
 //!
 //! `cargo run --release --example broad_views -- [CASES] [FIRST_SEED]`
 
@@ -104,7 +105,7 @@ fn main() {
         "  of the misses, {beyond_estimator} are missed by the estimator started at the truth too"
     );
     println!(
-        "  of the misses, {} lie in a basin less likely than the truth's (the search's), {} in one at least as likely (the estimator's), {} lost the hole the model scores",
+        "  of the misses, {} lie in a basin less likely than the truth's (the search's), {} in one at least as likely (the estimator's), {} lost their hole (unscored: the grid model needs one)",
         by_basin[0], by_basin[1], by_basin[2]
     );
     println!(
