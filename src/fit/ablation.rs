@@ -12,6 +12,9 @@ pub enum Stage {
     /// the other reading of the top view, in the search and in the polish
     /// ([`super::prepare`]'s `turned_dual`)
     DualReading,
+    /// a closed body's hollow reading (the same outline around a through hole) in the
+    /// search ([`super::prepare`]'s `hollowed`)
+    HollowedReading,
     /// a cloud whose viewpoint was only inferred searched as a view from nowhere too, the
     /// likelier reading kept ([`super::search::batch`])
     SettleInferredView,

@@ -523,6 +523,24 @@ impl Prepared<'_> {
         Some(dual)
     }
 
+    /// The hollow reading of a closed fit ([`starts::hollowed`], a4
+    /// [`search::HOLLOWED_A4`]) inside its supported box, where a4 is free, no size is
+    /// known and the view is across the fit's axis ([`search::HOLLOW_ACROSS_DEGREES`]);
+    /// none for a fit with a hole already, and none without a viewpoint (a cloud all round
+    /// its object shows a hole's inside).
+    pub(super) fn hollowed(&self, fitted: &Candidate) -> Option<Candidate> {
+        if self.skip.contains(&Stage::HollowedReading)
+            || fitted.shape.a4 >= 1.0
+            || self.known[..4].iter().any(Option::is_some)
+            || !search::seen_across_its_axis(fitted, self.viewpoint?)
+        {
+            return None;
+        }
+        let mut hollow = starts::hollowed(fitted, search::HOLLOWED_A4);
+        hollow.shape = self.supported_bounds(&hollow).interior(&hollow.shape);
+        Some(hollow)
+    }
+
     /// Whether this is a superellipsoid's fit: a4 held at 0 (`model: superellipsoid`, or
     /// `auto`'s second fit).
     pub(super) fn holds_a4_at_zero(&self) -> bool {

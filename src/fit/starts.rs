@@ -260,6 +260,20 @@ pub fn axes_cycled(candidate: &Candidate) -> [Candidate; 2] {
     ]
 }
 
+/// The hollow reading of `closed`, a body without a through hole (a4 < 1: an apple, or
+/// none at all): the same outer radii a1·(1 + a4) and a2·(1 + a4), height, exponents and
+/// pose around a hole of a4 = `a4`. A tube seen from the side shows its outside only,
+/// which least squares fits as well closed as open; whether the sensor should have seen
+/// into a hole is for the likelihood to weigh, given both readings.
+pub fn hollowed(closed: &Candidate, a4: f64) -> Candidate {
+    let s = closed.shape;
+    let shrink = (1.0 + s.a4.max(0.0)) / (1.0 + a4);
+    Candidate {
+        shape: Shape::new(s.a1 * shrink, s.a2 * shrink, s.a3, a4, s.eps1, s.eps2),
+        pose: closed.pose,
+    }
+}
+
 /// The superellipsoid (a4 = 0) with the outline of `free`, a free fit of the same
 /// cloud: its radii a1·(1 + a4) and a2·(1 + a4) (an apple's or a ring's outer
 /// radius), its height, exponents and pose. `model: auto`'s superellipsoid search starts
@@ -277,6 +291,26 @@ pub fn superellipsoid_outline(free: &Candidate) -> Candidate {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A closed body's hollow reading keeps its outline (outer radii, height, exponents,
+    /// pose) around a hole of the a4 asked for.
+    #[test]
+    fn a_closed_bodys_hollow_reading_keeps_its_outline() {
+        let pose = Pose::new(DQuat::from_rotation_y(0.4), DVec3::new(0.0, 0.1, 0.5));
+        for a4 in [0.0, 0.4, 0.9] {
+            let closed = Candidate {
+                shape: Shape::new(0.06, 0.05, 0.12, a4, 0.4, 0.9),
+                pose,
+            };
+            let hollow = hollowed(&closed, 2.0);
+            let s = hollow.shape;
+            assert_eq!(s.a4, 2.0);
+            assert!((s.a1 * 3.0 - 0.06 * (1.0 + a4)).abs() < 1e-12, "{s:?}");
+            assert!((s.a2 * 3.0 - 0.05 * (1.0 + a4)).abs() < 1e-12, "{s:?}");
+            assert_eq!((s.a3, s.eps1, s.eps2), (0.12, 0.4, 0.9));
+            assert_eq!(hollow.pose, pose);
+        }
+    }
 
     /// An apple's and a ring's outline is their outer radius; a superellipsoid is its
     /// own outline.

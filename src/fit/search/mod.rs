@@ -14,7 +14,9 @@
 //!    ([`noisy`]): a few likelihood iterations on [`ROUND2_POINTS`] points on a noisy
 //!    cloud, least squares under a Cauchy loss on a precise one.
 //! 3. The likeliest, and any within [`CLOSE_MARGIN`] of it, converge on the stage-2
-//!    sample; the most likely stands, and goes on to the polish ([`polish`]).
+//!    sample; a closed one (no through hole) seen across its axis converges beside its
+//!    hollow reading ([`starts::hollowed`]) by the likelihood, whatever the cloud's noise;
+//!    the most likely stands, and goes on to the polish ([`polish`]).
 //!
 //! A cloud read both as a view from its frame's origin and as a view from nowhere is
 //! searched in both readings in the same batch; a reading plainly less likely after round 2
@@ -75,6 +77,21 @@ pub const ROBUST_FIRST_ITERATIONS: usize = 15;
 /// Iterations the first round adds for a candidate straight from round 1 (not yet
 /// converged).
 pub const ROUND1_SHORTFALL: usize = 15;
+/// The hole of a closed candidate's hollow reading ([`super::starts::hollowed`]): a hole a
+/// third of the outline's radius, for the likelihood to move from.
+pub const HOLLOWED_A4: f64 = 2.0;
+/// A closed candidate gets its hollow reading only from a view at least this far from
+/// its axis: nearer the axis the sensor sees the face a hole would open, and the points
+/// have already said whether there is one.
+pub const HOLLOW_ACROSS_DEGREES: f64 = 60.0;
+
+/// Whether `viewpoint` sees `candidate` across its axis: at least
+/// [`HOLLOW_ACROSS_DEGREES`] from it, where a hole's inside may not show.
+pub(super) fn seen_across_its_axis(candidate: &Candidate, viewpoint: DVec3) -> bool {
+    let axis = candidate.pose.rotation * DVec3::Z;
+    let sight = (candidate.pose.translation - viewpoint).normalize_or_zero();
+    axis.dot(sight).abs() <= HOLLOW_ACROSS_DEGREES.to_radians().cos()
+}
 /// A round-2 candidate within this of the best (mean log-likelihood per point) converges
 /// beside it before the choice.
 pub const CLOSE_MARGIN: f64 = 0.05;

@@ -368,8 +368,9 @@ fn refine_noisy(
 /// Each cloud's fit: its likeliest round-2 candidate, converged on the stage-2 sample
 /// where the likelihood refined it (a runner-up within [`CLOSE_MARGIN`] converges too,
 /// and the likelier of the two stands: the two readings of a top view are often that
-/// close). The polish then takes it on more of the cloud's points. With the number of
-/// finalists converged.
+/// close). A closed one seen across its axis has its hollow reading converged beside it
+/// ([`hollow_finalist`]). The polish then takes it on more of the cloud's points. With
+/// the number of finalists converged.
 pub(super) fn finalists(
     group: &[(usize, Prepared)],
     round2: &[Vec<Scored>],
@@ -382,21 +383,79 @@ pub(super) fn finalists(
         .enumerate()
         .map(|(cloud, (_, p))| {
             let best = best2[cloud];
-            if !best.modelled || dropped[cloud] {
+            if dropped[cloud] {
                 return (best, 0);
             }
+            if !best.modelled {
+                if p.hollowed(&best.candidate).is_none() {
+                    return (best, 0);
+                }
+                let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
+                return match hollow_finalist(p, &sample, best, None) {
+                    Some(hollow) => (hollow, 2),
+                    None => (best, 0),
+                };
+            }
+            let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
             let close: Vec<Scored> = round2[cloud]
                 .iter()
                 .filter(|c| c.modelled && c.score <= best.score + CLOSE_MARGIN)
                 .copied()
                 .collect();
-            let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
             let mut converged: Vec<Scored> = most_likely_distinct(close, 2)
                 .into_par_iter()
                 .map(|c| converge(p, &sample, c, REFINE_ITERATIONS))
                 .collect();
             converged.sort_by(|a, b| a.rank(b));
-            (converged.first().copied().unwrap_or(best), converged.len())
+            let winner = converged.first().copied().unwrap_or(best);
+            match hollow_finalist(p, &sample, winner, Some(winner)) {
+                Some(hollow) => (hollow, converged.len() + 1),
+                None => (winner, converged.len()),
+            }
         })
         .collect()
+}
+
+/// The hollow reading of a closed finalist ([`Prepared::hollowed`]) converged by the
+/// likelihood on `sample`, where it is likelier than the finalist converged the same way
+/// (`converged`, where the finalist already is; a precise cloud's finalist, fitted by least
+/// squares, converges here for the comparison only). None where the finalist has a hole
+/// or the hollow reading is not the likelier: a tube seen from the side shows its outside
+/// only, which least squares fits as well closed, and only the likelihood weighs whether
+/// the sensor should have seen into a hole.
+fn hollow_finalist(
+    p: &Prepared,
+    sample: &Sample,
+    finalist: Scored,
+    converged: Option<Scored>,
+) -> Option<Scored> {
+    let opened = p.hollowed(&finalist.candidate)?;
+    let start = Scored {
+        sigma: finalist.sigma.max(REFINE_SIGMA_FLOOR),
+        ..finalist
+    };
+    // (a refinement that collapses hands its start back, score and all: no verdict)
+    let moved = |r: Scored, from: &Candidate| (r.candidate.shape != from.shape).then_some(r);
+    let (hollow, closed) = rayon::join(
+        || {
+            let from = Scored {
+                candidate: opened,
+                ..start
+            };
+            moved(converge(p, sample, from, REFINE_ITERATIONS), &opened)
+        },
+        || {
+            converged.or_else(|| {
+                moved(
+                    converge(p, sample, start, REFINE_ITERATIONS),
+                    &finalist.candidate,
+                )
+            })
+        },
+    );
+    let (hollow, closed) = (hollow?, closed?);
+    (hollow.candidate.shape.a4 > 1.0 && hollow.rank(&closed).is_lt()).then_some(Scored {
+        modelled: true,
+        ..hollow
+    })
 }
