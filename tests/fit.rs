@@ -973,7 +973,8 @@ fn a_thin_ring_with_few_noisy_points_is_flagged_uncertain() {
 /// and a4's own error is measured against 1, the least a4 with a hole (against the
 /// rounding the solver keeps above 0 it read as billions of percent and warned every
 /// such fit). A whole box leaves no doubt that it has no hole; a tall roll seen from the
-/// side and fitted without its hole (`suite::broad`'s view 2000029) does.
+/// side and fitted without its hole (`suite::broad`'s view 2000029, the search's hollow
+/// reading left out: with it the fit keeps the hole) does.
 #[test]
 fn a_free_fit_that_comes_out_a_superellipsoid_is_warned_only_where_a_hole_could_be() {
     use supertoroid::model::{Pose, Shape};
@@ -1003,6 +1004,7 @@ fn a_free_fit_that_comes_out_a_superellipsoid_is_warned_only_where_a_hole_could_
     let roll = supertoroid::suite::broad::view(seed);
     let options = FitOptions {
         seed,
+        skip: vec![supertoroid::fit::ablation::Stage::HollowedReading],
         ..Default::default()
     };
     let report = fit(&mut evaluator, &roll.points, &options).unwrap();

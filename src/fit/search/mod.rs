@@ -84,14 +84,6 @@ pub const HOLLOWED_A4: f64 = 2.0;
 /// its axis: nearer the axis the sensor sees the face a hole would open, and the points
 /// have already said whether there is one.
 pub const HOLLOW_ACROSS_DEGREES: f64 = 60.0;
-
-/// Whether `viewpoint` sees `candidate` across its axis: at least
-/// [`HOLLOW_ACROSS_DEGREES`] from it, where a hole's inside may not show.
-pub(super) fn seen_across_its_axis(candidate: &Candidate, viewpoint: DVec3) -> bool {
-    let axis = candidate.pose.rotation * DVec3::Z;
-    let sight = (candidate.pose.translation - viewpoint).normalize_or_zero();
-    axis.dot(sight).abs() <= HOLLOW_ACROSS_DEGREES.to_radians().cos()
-}
 /// A round-2 candidate within this of the best (mean log-likelihood per point) converges
 /// beside it before the choice.
 pub const CLOSE_MARGIN: f64 = 0.05;
@@ -233,6 +225,14 @@ pub(super) fn noisy(p: &Prepared, c: &Candidate, sigma: f64) -> bool {
                 && likelihood::surface_coverage(&p.stage2_pts, c, sigma) >= LIKELIHOOD_MIN_COVERAGE
         }
     }
+}
+
+/// Whether `viewpoint` sees `candidate` across its axis: at least
+/// [`HOLLOW_ACROSS_DEGREES`] from it, where a hole's inside may not show.
+pub(super) fn seen_across_its_axis(candidate: &Candidate, viewpoint: DVec3) -> bool {
+    let axis = candidate.pose.rotation * DVec3::Z;
+    let sight = (candidate.pose.translation - viewpoint).normalize_or_zero();
+    axis.dot(sight).abs() <= HOLLOW_ACROSS_DEGREES.to_radians().cos()
 }
 
 /// 1.4826 · the median |residual|: the noise a candidate reads off its points.
