@@ -5,9 +5,11 @@
 //! weights (2.5 sigma), and the gauge of a shape that is symmetric about its axis (a
 //! turn about it moves no point) is left out by a pseudo-inverse.
 //!
-//! A fit whose standard errors reach half the success rule's tolerances (sizes 10%, a4
-//! 10%, eps 0.15) gets the `uncertain shape` warning: the points leave the shape loose
-//! enough that a fit off by a tolerance is ordinary. Not in the paper.
+//! A hole seen from the side has a4's error from the likelihood's information too
+//! ([`likelihood_a4_error`]). A fit whose standard errors reach half the success rule's
+//! tolerances (sizes 10%, a4 10%, eps 0.15) gets the `uncertain shape` warning: the
+//! points leave the shape loose enough that a fit off by a tolerance is ordinary. Not in
+//! the paper.
 
 use crate::eval::{Candidate, CpuEvaluator, Evaluator, Loss};
 use crate::model::{Pose, Shape};
@@ -40,7 +42,8 @@ pub struct StandardErrors {
     pub sizes: f64,
     /// a4's over a4; for a free fit that came out a superellipsoid (a4 on its bound at
     /// 0), a4's over 1, the least a4 with a hole: whether the points could hold one; 0
-    /// where a4 is held (a superellipsoid fit, a known a4)
+    /// where a4 is held (a superellipsoid fit, a known a4); for a hole the likelihood
+    /// fitted, seen from the side, the larger of this and [`likelihood_a4_error`]
     pub a4: f64,
     /// the larger of eps1 and eps2's
     pub eps: f64,
@@ -143,6 +146,38 @@ pub fn warning(errors: &StandardErrors) -> Option<String> {
             errors.eps
         )
     })
+}
+
+/// a4's standard error over a4 by the noise model's own information at a holed fit: the
+/// BHHH outer product of the points' scores on `data` ([`crate::fit::objective`], sigma
+/// and pose free), times the cloud's `count`, pseudo-inverted as the least-squares
+/// covariance is. Seen from the side a tube shows its outside, and how its outer radius
+/// splits into hole and wall is weighed only by where the sensor would have seen into
+/// the hole, which the meridian distances do not see: their covariance reads a4 as pinned
+/// where the likelihood is flat.
+pub fn likelihood_a4_error(
+    data: &crate::fit::objective::Data,
+    candidate: &Candidate,
+    sigma: f64,
+    count: usize,
+) -> Option<f64> {
+    use crate::fit::objective::{Objective, parameters};
+    let mut objective = Objective::new(data, candidate, sigma);
+    let x = parameters(candidate, sigma);
+    objective.hold(&x);
+    let (_, _, outer) = objective.evaluate(&x, true);
+    let n = outer.nrows();
+    let information = DMatrix::from_fn(n, n, |i, j| outer[(i, j)] * count as f64);
+    let scale: Vec<f64> = (0..n)
+        .map(|i| {
+            let d = information[(i, i)];
+            if d > 0.0 { 1.0 / d.sqrt() } else { 0.0 }
+        })
+        .collect();
+    let scaled = DMatrix::from_fn(n, n, |i, j| information[(i, j)] * scale[i] * scale[j]);
+    let inverse = scaled.pseudo_inverse(1e-10).ok()?;
+    let sd = inverse[(3, 3)].max(0.0).sqrt() * scale[3];
+    (sd.is_finite() && candidate.shape.a4 > 0.0).then(|| sd / candidate.shape.a4)
 }
 
 /// The standard deviation of each shape parameter (None for a held one) from the normal

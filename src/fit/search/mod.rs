@@ -153,7 +153,7 @@ impl Sample {
         total / self.points.len().max(1) as f64
     }
 
-    fn data(&self) -> Data<'_> {
+    pub(super) fn data(&self) -> Data<'_> {
         Data {
             points: &self.points,
             outlier_weight: LIKELIHOOD_OUTLIER_WEIGHT,
