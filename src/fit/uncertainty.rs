@@ -168,6 +168,14 @@ pub fn likelihood_a4_error(
     let (_, _, outer) = objective.evaluate(&x, true);
     let n = outer.nrows();
     let information = DMatrix::from_fn(n, n, |i, j| outer[(i, j)] * count as f64);
+    let sd = inverse_diagonal(&information)?[3].sqrt();
+    (sd.is_finite() && candidate.shape.a4 > 0.0).then(|| sd / candidate.shape.a4)
+}
+
+/// The diagonal of the pseudo-inverse of `information` (the variances), taken after
+/// Jacobi scaling so that its cut-off means the same in metres and radians.
+fn inverse_diagonal(information: &DMatrix<f64>) -> Option<Vec<f64>> {
+    let n = information.nrows();
     let scale: Vec<f64> = (0..n)
         .map(|i| {
             let d = information[(i, i)];
@@ -176,8 +184,11 @@ pub fn likelihood_a4_error(
         .collect();
     let scaled = DMatrix::from_fn(n, n, |i, j| information[(i, j)] * scale[i] * scale[j]);
     let inverse = scaled.pseudo_inverse(1e-10).ok()?;
-    let sd = inverse[(3, 3)].max(0.0).sqrt() * scale[3];
-    (sd.is_finite() && candidate.shape.a4 > 0.0).then(|| sd / candidate.shape.a4)
+    Some(
+        (0..n)
+            .map(|i| inverse[(i, i)].max(0.0) * scale[i] * scale[i])
+            .collect(),
+    )
 }
 
 /// The standard deviation of each shape parameter (None for a held one) from the normal
@@ -193,21 +204,10 @@ fn standard_deviations(
         .filter(|&k| k >= 6 || !held[k])
         .collect();
     let jtj = DMatrix::from_fn(free.len(), free.len(), |i, j| jtj[free[i]][free[j]]);
-    // Jacobi scaling, so that the pseudo-inverse's cut-off means the same in metres and
-    // radians
-    let scale: Vec<f64> = (0..free.len())
-        .map(|i| {
-            let d = jtj[(i, i)];
-            if d > 0.0 { 1.0 / d.sqrt() } else { 0.0 }
-        })
-        .collect();
-    let scaled = DMatrix::from_fn(free.len(), free.len(), |i, j| {
-        jtj[(i, j)] * scale[i] * scale[j]
-    });
-    let inverse = scaled.pseudo_inverse(1e-10).ok()?;
+    let variances = inverse_diagonal(&jtj)?;
     Some(std::array::from_fn(|parameter| {
         let i = free.iter().position(|&k| k == parameter)?;
-        Some((inverse[(i, i)].max(0.0) * variance).sqrt() * scale[i])
+        Some((variances[i] * variance).sqrt())
     }))
 }
 
