@@ -387,11 +387,11 @@ pub(super) fn finalists(
                 return (best, 0);
             }
             if !best.modelled {
-                if p.hollowed(&best.candidate).is_none() {
+                let Some(opened) = p.hollowed(&best.candidate) else {
                     return (best, 0);
-                }
+                };
                 let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
-                return match hollow_finalist(p, &sample, best, None) {
+                return match hollow_finalist(p, &sample, opened, best, false) {
                     Some(hollow) => (hollow, 2),
                     None => (best, 0),
                 };
@@ -408,7 +408,10 @@ pub(super) fn finalists(
                 .collect();
             converged.sort_by(|a, b| a.rank(b));
             let winner = converged.first().copied().unwrap_or(best);
-            match hollow_finalist(p, &sample, winner, Some(winner)) {
+            let hollow = p
+                .hollowed(&winner.candidate)
+                .and_then(|opened| hollow_finalist(p, &sample, opened, winner, true));
+            match hollow {
                 Some(hollow) => (hollow, converged.len() + 1),
                 None => (winner, converged.len()),
             }
@@ -416,20 +419,20 @@ pub(super) fn finalists(
         .collect()
 }
 
-/// The hollow reading of a closed finalist ([`Prepared::hollowed`]) converged by the
-/// likelihood on `sample`, where it is likelier than the finalist converged the same way
-/// (`converged`, where the finalist already is; a precise cloud's finalist, fitted by least
-/// squares, converges here for the comparison only). None where the finalist has a hole
-/// or the hollow reading is not the likelier: a tube seen from the side shows its outside
+/// `opened`, the hollow reading of a closed finalist ([`Prepared::hollowed`]), converged
+/// by the likelihood on `sample`, where it is likelier than the finalist converged the
+/// same way (`converged` says the finalist already is; a precise cloud's finalist, fitted
+/// by least squares, converges here for the comparison only). None where the hollow
+/// reading is not the likelier: a tube seen from the side shows its outside
 /// only, which least squares fits as well closed, and only the likelihood weighs whether
 /// the sensor should have seen into a hole.
 fn hollow_finalist(
     p: &Prepared,
     sample: &Sample,
+    opened: Candidate,
     finalist: Scored,
-    converged: Option<Scored>,
+    converged: bool,
 ) -> Option<Scored> {
-    let opened = p.hollowed(&finalist.candidate)?;
     let start = Scored {
         sigma: finalist.sigma.max(REFINE_SIGMA_FLOOR),
         ..finalist
@@ -445,12 +448,14 @@ fn hollow_finalist(
             moved(converge(p, sample, from, REFINE_ITERATIONS), &opened)
         },
         || {
-            converged.or_else(|| {
+            if converged {
+                Some(finalist)
+            } else {
                 moved(
                     converge(p, sample, start, REFINE_ITERATIONS),
                     &finalist.candidate,
                 )
-            })
+            }
         },
     );
     let (hollow, closed) = (hollow?, closed?);
