@@ -2174,6 +2174,7 @@ fn every_tuning_constant_of_the_fit_is_in_docs_constants_md() {
     let mut files = Vec::new();
     sources(&root.join("src/fit"), &mut files);
     files.push(root.join("src/solve/mod.rs"));
+    files.push(root.join("src/solve/likelihood.rs"));
     // module-level `[pub[(..)]] const NAME: TYPE = VALUE;` with a numeric VALUE
     let numeric = |v: &str| {
         v.chars()
