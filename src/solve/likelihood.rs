@@ -59,6 +59,9 @@ pub struct Stopping {
     pub decrease: f64,
     /// an accepted step shorter than this
     pub step: f64,
+    /// the decrease the undamped step predicts, g·H⁻¹g / 2 (the quadratic model's way
+    /// to its minimum), below which the point is taken as the minimum (0: never)
+    pub predicted: f64,
 }
 
 /// What the loop held fixed.
@@ -84,7 +87,8 @@ pub struct Minimum {
 /// stopping above 1e6). A step whose value in its own new reference is above the last
 /// accepted value counts as rejected, and the problem goes back to the reference it had
 /// before ([`LikelihoodProblem::restore`]); [`TAKEN_BACK_IN_A_ROW`] such steps end the
-/// loop.
+/// loop. It stops too where the undamped step predicts less than
+/// [`Stopping::predicted`].
 pub fn minimise(
     problem: &mut impl LikelihoodProblem,
     mut x: Vector,
@@ -122,6 +126,17 @@ pub fn minimise(
     };
     let trial_gradients = problem.trial_gradients();
     let (mut f, mut g, mut h) = problem.evaluate(&x, true);
+    let at_minimum = |g: &Vector, h: &Matrix| {
+        stopping.predicted > 0.0
+            && solve_step(g, h, 0.0).is_some_and(|step| -0.5 * g.dot(&step) < stopping.predicted)
+    };
+    if at_minimum(&g, &h) {
+        return Minimum {
+            x,
+            value: f,
+            iterations: 0,
+        };
+    }
     let mut lambda = 1e-3;
     let mut iterations = 0;
     let mut small_steps = 0;
@@ -171,7 +186,7 @@ pub fn minimise(
                     continue;
                 }
                 taken_back = 0;
-                if last {
+                if last || at_minimum(&g, &h) {
                     break;
                 }
             }
@@ -421,7 +436,48 @@ mod tests {
             max_iterations: 100,
             decrease: 1e-12,
             step: 1e-12,
+            predicted: 0.0,
         }
+    }
+
+    /// The bowl's undamped step predicts |x - centre|² / 2: a start predicting less than
+    /// `predicted` takes no step, one predicting more ends its steps within it.
+    #[test]
+    fn it_stops_where_the_undamped_step_predicts_less_than_asked() {
+        let held = Held {
+            parameters: [false; PARAMETERS],
+            axis: None,
+        };
+        let start = Vector::from_element(0.1); // predicts 13 * 0.01 / 2 = 0.065
+        let asking = |predicted| Stopping {
+            predicted,
+            ..stopping()
+        };
+        let near = minimise(
+            &mut Bowl::new(Vector::zeros(), -10.0),
+            start,
+            &held,
+            &asking(0.07),
+        );
+        assert_eq!((near.iterations, near.x), (0, start));
+        let far = minimise(
+            &mut Bowl::new(Vector::zeros(), -10.0),
+            start,
+            &held,
+            &asking(1e-4),
+        );
+        assert!(far.iterations > 0);
+        assert!(0.5 * far.x.norm_squared() < 1e-4, "{far:?}");
+        assert!(
+            far.iterations
+                < minimise(
+                    &mut Bowl::new(Vector::zeros(), -10.0),
+                    start,
+                    &held,
+                    &stopping()
+                )
+                .iterations
+        );
     }
 
     #[test]

@@ -92,6 +92,9 @@ pub fn refine_on(
         max_iterations,
         decrease: STOP_DECREASE,
         step: 1e-7,
+        // (candidates are ranked by their values here: each is refined on to the
+        // decrease test, not stopped a standard error short)
+        predicted: 0.0,
     };
     let minimum = minimise(&mut problem, x, &limits.held(start), &stopping);
     Refined {
