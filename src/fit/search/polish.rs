@@ -1,6 +1,6 @@
 //! The search's last step: the fit the likelihood refined, refined once more by the noise
 //! model's surface grid ([`likelihood::refine_finely`]) on up to
-//! [`FitOptions::polish_points`] of the cloud's points, a view's top read both ways; and
+//! [`FitOptions::polish_points`] of the cloud's points, its top view read both ways; and
 //! the warning of a fit left far off its points.
 //!
 //! Why a second estimator of the same model: the search's per-point quadrature
@@ -107,8 +107,8 @@ pub(super) fn polish(
 }
 
 /// The noise model's maximum-likelihood fit from `c` at noise `sigma` (normalised units)
-/// on the sample of `p`, and, seen from a viewpoint, from the other reading of its top
-/// view ([`Prepared::turned_dual`]), which replaces it when more likely by `dual_margin`
+/// on the sample of `p`, and from the other reading of its top view
+/// ([`Prepared::turned_dual`]), which replaces it when more likely by `dual_margin`
 /// (mean log-likelihood per point); none where the model collapses.
 fn refine_both_readings(
     p: &Prepared,
@@ -133,14 +133,10 @@ fn refine_both_readings(
     let not_collapsed =
         |r: &likelihood::Refined| r.sigma <= MAX_SIGMA_GROWTH * sigma && !collapsed_section(r);
     let mut refined = refine(c, sigma, likelihood::MAX_ITERATIONS).filter(not_collapsed);
-    // a view's other reading of its top; a few steps tell the plainly less likely ones,
-    // which go no further. (A cloud without a viewpoint shows its whole outline, which
-    // tells the two readings apart: read both ways there, the polish changed no fit of
-    // suite sets 930000, 1440000, 1740000, 1750000 or model choice 810000, at 12-14% of
-    // their median time.)
+    // the top view's other reading; a few steps tell the plainly less likely ones, which
+    // go no further
     let (model_fit, model_sigma) = refined.map_or((*c, sigma), |r| (r.candidate, r.sigma));
     if !p.skip.contains(&Stage::DualReading)
-        && p.viewpoint.is_some()
         && let Some(dual) = p.turned_dual(&model_fit)
         && let Some(first) = refine(&dual, model_sigma, DUAL_FIRST_ITERATIONS)
         && refined.is_none_or(|best| first.objective < best.objective)
