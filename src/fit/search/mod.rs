@@ -42,8 +42,10 @@ use rayon::prelude::*;
 /// Least-squares iterations of round 1 (starts a few iterations apart have found their
 /// basins; the rest is round 2's).
 pub const ROUND1_ITERATIONS: usize = 10;
-/// Candidates round 1 keeps, in distinct basins.
-pub const ROUND1_KEPT: usize = 4;
+/// Candidates round 1 keeps, in distinct basins. Five with thin and thick readings told
+/// apart ([`DISTINCT_THICKNESS`]); six gained no more on fresh broadened views and cost
+/// more time (`docs/fit.md`).
+pub const ROUND1_KEPT: usize = 5;
 /// A cloud searched both as a view and as a view from nowhere goes on in only one
 /// reading where that reading's best round-2 candidate is more likely than the other's
 /// by this much (mean log-likelihood per point; a view's points spread all round lose
