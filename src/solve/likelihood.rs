@@ -310,7 +310,7 @@ mod tests {
 
     impl DriftingBowl {
         /// Centred at the origin, at `start`, drifting by 3 in every parameter.
-        fn from(start: Vector, threshold: f64) -> Self {
+        fn starting_at(start: Vector, threshold: f64) -> Self {
             Self {
                 bowl: Bowl::new(Vector::zeros(), -10.0),
                 drift: Vector::from_element(3.0),
@@ -355,7 +355,7 @@ mod tests {
     #[test]
     fn steps_whose_new_reference_is_worse_are_taken_back_and_two_in_a_row_end_the_loop() {
         let start = Vector::from_element(1.0);
-        let mut drifting = DriftingBowl::from(start, 0.5);
+        let mut drifting = DriftingBowl::starting_at(start, 0.5);
         let minimum = minimise(&mut drifting, start, &nothing_held(), &stopping());
         assert_eq!(drifting.bowl.centre, Vector::zeros());
         assert_eq!(minimum.x, start);
@@ -369,7 +369,7 @@ mod tests {
         let start = Vector::from_element(1.0);
         // (the first step, damped by 1e-3, is 3.602 long and moves the centre; the second,
         // damped fourfold more, is 3.591)
-        let mut drifting = DriftingBowl::from(start, 3.595);
+        let mut drifting = DriftingBowl::starting_at(start, 3.595);
         let minimum = minimise(&mut drifting, start, &nothing_held(), &stopping());
         assert_eq!(drifting.bowl.centre, Vector::zeros());
         assert!(minimum.x.norm() < 1e-6, "{minimum:?}");
