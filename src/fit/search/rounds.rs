@@ -253,6 +253,9 @@ pub(super) fn round2(
 /// Round 2 of the `precise` clouds: least squares on the stage-2 sample, every
 /// candidate (and the other reading of each cloud's best top view) in one batch, then the
 /// robust rounds for the two likeliest in distinct basins; one list per precise cloud.
+/// A candidate whose cost is still [`ROUND2_PRUNE_RATIO`] times its cloud's best after
+/// [`ROUND2_PRUNE_AFTER`] iterations stops there (and is scored as it stands): on a
+/// precise cloud that is a wrong basin, and the batch would otherwise run on for it.
 fn refine_precise(
     evaluator: &mut dyn Evaluator,
     group: &[(usize, Prepared)],
@@ -286,7 +289,12 @@ fn refine_precise(
         .zip(&sets)
         .map(|(c, &cloud)| group[cloud].1.supported_bounds(c))
         .collect();
-    let solutions = solve_on(evaluator, &candidates, &sets, &boxes, &group[0].1.opts2)?;
+    let options = SolverOptions {
+        prune_after: ROUND2_PRUNE_AFTER,
+        prune_ratio: ROUND2_PRUNE_RATIO,
+        ..group[0].1.opts2
+    };
+    let solutions = solve_on(evaluator, &candidates, &sets, &boxes, &options)?;
     let sample_refs: Vec<&Sample> = mids.iter().collect();
     let scored2 = scored(
         evaluator,
