@@ -544,7 +544,7 @@ fn fit_group(
                 best.iterations,
                 None,
                 stage1_iterations[cloud],
-                evaluator,
+                BackendOut::of(evaluator),
             )
         })
         .collect();
@@ -611,7 +611,7 @@ fn report(
     stage2_iterations: usize,
     modelled_sigma: Option<f64>,
     stage1_iterations: usize,
-    evaluator: &dyn Evaluator,
+    backend: BackendOut,
 ) -> FitReport {
     let (shape, pose) = p.norm.to_world(candidate);
     let mut quality = quality(&shape, &pose, p.points);
@@ -671,10 +671,7 @@ fn report(
             stage1: stage1_iterations,
             stage2: stage2_iterations,
         },
-        backend: BackendOut {
-            kind: evaluator.kind().into(),
-            adapter: evaluator.device_name(),
-        },
+        backend,
         // set by `fit_batch` from the viewpoint's resolution
         viewpoint: ViewpointUsed::default(),
         points: PointsOut {

@@ -69,6 +69,16 @@ pub struct BackendOut {
     pub adapter: String,
 }
 
+impl BackendOut {
+    /// The evaluator a fit ran on.
+    pub fn of(evaluator: &dyn crate::eval::Evaluator) -> Self {
+        Self {
+            kind: evaluator.kind().into(),
+            adapter: evaluator.device_name(),
+        }
+    }
+}
+
 #[derive(Clone, Debug, Serialize, utoipa::ToSchema)]
 pub struct PointsOut {
     pub input: usize,

@@ -143,7 +143,7 @@ fn fit_batch_searched(
             });
         }
     }
-    polish::polish(evaluator, &with_resolved(clouds, &resolved), &mut results);
+    polish::polish(&with_resolved(clouds, &resolved), &mut results);
     for (r, (_, used)) in results.iter_mut().zip(resolved) {
         if let Ok(r) = r {
             r.viewpoint = used;
@@ -225,7 +225,7 @@ fn searched_once(
                 best.iterations,
                 best.modelled.then_some(best.sigma),
                 f.stage1_iterations,
-                evaluator,
+                BackendOut::of(evaluator),
             );
             // (a fit the likelihood refined to a noise too small for the model to matter
             // is a precise one: the polish passes it by)

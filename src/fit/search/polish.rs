@@ -36,74 +36,81 @@ const DUAL_FIRST_ITERATIONS: usize = 5;
 /// Polishes each modelled fit of `results` (see the module docs) unless its time so far
 /// is over its [`FitOptions::time_budget_ms`]. The polished fit replaces the fit unless
 /// it breaks the free space the fit kept; its time is reported under the stage's name.
+/// The clouds are polished side by side (a batch's, a scene's objects): each polish is
+/// its own, so a cloud's fit is the same alone or in a batch.
 pub(super) fn polish(
-    evaluator: &dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
     results: &mut [Result<FitReport, FitError>],
 ) {
-    for (result, (cloud, options)) in results.iter_mut().zip(clouds) {
-        let Ok(fitted) = result.as_ref() else {
-            continue;
-        };
-        if !fitted.noise_modelled
-            || options.polish_points == 0
-            || options.skip.contains(&Stage::PolishOnMorePoints)
-        {
-            continue;
-        }
-        if options
-            .time_budget_ms
-            .is_some_and(|budget| fitted.timing_ms.total > budget)
-        {
-            if let Ok(r) = result.as_mut() {
-                r.timing_ms
-                    .over_budget
-                    .push(ablation::name(Stage::PolishOnMorePoints));
-            }
-            continue;
-        }
-        let start = Instant::now();
-        let polish_options = FitOptions {
-            stage2_points: options.polish_points,
-            ..(*options).clone()
-        };
-        let Ok(p) = prepare(cloud, &polish_options, StartSet::Usual) else {
-            continue;
-        };
-        let c = p.norm.candidate(&fitted.fitted.0, &fitted.fitted.1);
-        let sigma = fitted.quality.noise_sigma / p.norm.scale;
-        let Some(refined) = refine_both_readings(&p, &c, sigma, POLISH_DUAL_MARGIN) else {
-            continue;
-        };
-        let mut polished = report(
-            &p,
-            &refined.candidate,
-            fitted.iterations.stage2 + refined.iterations,
-            Some(refined.sigma),
-            fitted.iterations.stage1,
-            evaluator,
-        );
-        let keeps_free_space = |r: &FitReport| {
-            r.free_space_violation
-                .is_none_or(|v| v <= free_space::MAX_VIOLATED_FRACTION)
-        };
-        if keeps_free_space(fitted) && !keeps_free_space(&polished) {
-            continue;
-        }
-        let spent = start.elapsed().as_secs_f64() * 1e3;
-        polished.timing_ms = fitted.timing_ms.clone();
-        polished.timing_ms.total += spent;
-        polished
-            .timing_ms
-            .stages
-            .insert(ablation::name(Stage::PolishOnMorePoints), spent);
-        polished.points = PointsOut {
-            polish: Some(p.stage2_pts.len()),
-            ..fitted.points.clone()
-        };
-        polished.search = fitted.search.clone();
-        *result = Ok(polished);
+    results
+        .par_iter_mut()
+        .zip(clouds)
+        .for_each(|(result, (cloud, options))| polish_one(cloud, options, result));
+}
+
+/// [`polish`] of one cloud's fit.
+fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitReport, FitError>) {
+    let Ok(fitted) = result.as_ref() else {
+        return;
+    };
+    if !fitted.noise_modelled
+        || options.polish_points == 0
+        || options.skip.contains(&Stage::PolishOnMorePoints)
+    {
+        return;
     }
+    if options
+        .time_budget_ms
+        .is_some_and(|budget| fitted.timing_ms.total > budget)
+    {
+        if let Ok(r) = result.as_mut() {
+            r.timing_ms
+                .over_budget
+                .push(ablation::name(Stage::PolishOnMorePoints));
+        }
+        return;
+    }
+    let start = Instant::now();
+    let polish_options = FitOptions {
+        stage2_points: options.polish_points,
+        ..(*options).clone()
+    };
+    let Ok(p) = prepare(cloud, &polish_options, StartSet::Usual) else {
+        return;
+    };
+    let c = p.norm.candidate(&fitted.fitted.0, &fitted.fitted.1);
+    let sigma = fitted.quality.noise_sigma / p.norm.scale;
+    let Some(refined) = refine_both_readings(&p, &c, sigma, POLISH_DUAL_MARGIN) else {
+        return;
+    };
+    let mut polished = report(
+        &p,
+        &refined.candidate,
+        fitted.iterations.stage2 + refined.iterations,
+        Some(refined.sigma),
+        fitted.iterations.stage1,
+        fitted.backend.clone(),
+    );
+    let keeps_free_space = |r: &FitReport| {
+        r.free_space_violation
+            .is_none_or(|v| v <= free_space::MAX_VIOLATED_FRACTION)
+    };
+    if keeps_free_space(fitted) && !keeps_free_space(&polished) {
+        return;
+    }
+    let spent = start.elapsed().as_secs_f64() * 1e3;
+    polished.timing_ms = fitted.timing_ms.clone();
+    polished.timing_ms.total += spent;
+    polished
+        .timing_ms
+        .stages
+        .insert(ablation::name(Stage::PolishOnMorePoints), spent);
+    polished.points = PointsOut {
+        polish: Some(p.stage2_pts.len()),
+        ..fitted.points.clone()
+    };
+    polished.search = fitted.search.clone();
+    *result = Ok(polished);
 }
 
 /// The noise model's maximum-likelihood fit from `c` at noise `sigma` (normalised units)
