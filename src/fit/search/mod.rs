@@ -76,13 +76,13 @@ pub const ROUND2_ITERATIONS: usize = 5;
 pub const ROUND2_POINTS: usize = 400;
 /// Round 2's least squares on a precise cloud stops a candidate whose cost is over
 /// [`ROUND2_PRUNE_RATIO`] times its cloud's best after this many iterations. Such
-/// candidates (hundreds of times the best's cost on a depth frame's ring) ran to the
-/// 30-iteration cap and held the whole batch there; stopped, they cost the fit nothing
-/// it chose, and a precise depth frame's fit 16 ms of 62 (`docs/fit.md`).
+/// candidates (550-580 times the best's cost on a depth frame's ring) ran to the
+/// 30-iteration cap and held the whole batch there; stopped, they cost a precise depth
+/// frame's fit 16 ms of 62 less (`docs/fit.md`).
 pub const ROUND2_PRUNE_AFTER: usize = 6;
-/// See [`ROUND2_PRUNE_AFTER`]: a tenfold cost on a precise cloud is a wrong basin (a
-/// fourfold cut changed no fit either).
-pub const ROUND2_PRUNE_RATIO: f64 = 10.0;
+/// See [`ROUND2_PRUNE_AFTER`]. Not ten: a noise-free view's true basin can stand 15
+/// times a wrong one's cost at that point and still converge to its exact fit.
+pub const ROUND2_PRUNE_RATIO: f64 = 100.0;
 /// Iterations of the first round of the robust least squares.
 pub const ROBUST_FIRST_ITERATIONS: usize = 15;
 /// Iterations the first round adds for a candidate straight from round 1 (not yet
