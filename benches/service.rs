@@ -1,6 +1,6 @@
 //! Whole `/v1/fit/depth` requests through the HTTP service: a 640x480 depth frame (16-bit
 //! PNG, D435-like noise growing with range, flying pixels) of a ring on a table seen from
-//! 0.3 m, its object given by a segmenter's mask of about 55,000 pixels, and by a
+//! 0.28 m, its object given by a segmenter's mask of about 60,000 pixels, and by a
 //! detector's box instead (the table in it taken away); with the route's default model
 //! (`auto`: both models fitted and weighed) and with `supertoroid` named. Each request
 //! encodes nothing: the body is built once, the time is the round trip on localhost
@@ -30,7 +30,7 @@ const DEPTH_SCALE: f64 = 1e-4;
 fn ring_on_a_table() -> (DepthImage, Camera, DepthImage) {
     let shape = Shape::new(0.025, 0.025, 0.03, 1.6, 0.7, 1.0);
     let pose = Pose::new(DQuat::IDENTITY, DVec3::new(0.0, 0.0, 0.03));
-    let eye = DVec3::new(0.0, -0.21, 0.24);
+    let eye = DVec3::new(0.0, -0.2, 0.23);
     let camera = Camera::look_at(
         Intrinsics::REALSENSE_640X480,
         eye,
