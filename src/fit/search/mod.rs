@@ -77,8 +77,8 @@ pub const ROUND2_POINTS: usize = 400;
 /// Round 2's least squares on a precise cloud stops a candidate whose cost is over
 /// [`ROUND2_PRUNE_RATIO`] times its cloud's best after this many iterations. Such
 /// candidates (550-580 times the best's cost on a depth frame's ring) ran to the
-/// 30-iteration cap and held the whole batch there; stopped, they cost a precise depth
-/// frame's fit 16 ms of 62 less (`docs/fit.md`).
+/// 30-iteration cap and held the whole batch there; stopped, the ring's fit takes 59 ms
+/// instead of 77 (`docs/fit.md`).
 pub const ROUND2_PRUNE_AFTER: usize = 6;
 /// See [`ROUND2_PRUNE_AFTER`]. Not ten: a noise-free view's true basin can stand 15
 /// times a wrong one's cost at that point and still converge to its exact fit.
