@@ -533,6 +533,7 @@ fn fit_group(
         &vec![bounds; candidates.len()],
         &opts2,
     )?;
+    let backend = BackendOut::of(evaluator);
     let mut reports: Vec<FitReport> = group
         .iter()
         .zip(&stage2)
@@ -544,7 +545,7 @@ fn fit_group(
                 best.iterations,
                 None,
                 stage1_iterations[cloud],
-                BackendOut::of(evaluator),
+                backend.clone(),
             )
         })
         .collect();

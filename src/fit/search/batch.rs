@@ -186,6 +186,7 @@ fn searched_once(
     let mut by_likelihood = vec![false; clouds.len()];
     let mut round1_best: Vec<Option<Round1Best>> = vec![None; clouds.len()];
     let mut free_best: Vec<Option<Candidate>> = vec![None; clouds.len()];
+    let backend = BackendOut::of(evaluator);
     for mut group in groups {
         // a superellipsoid fit starts at its cloud's free fit's outline too (both clouds
         // share one normalisation): where the free fit is an apple without a dimple, the
@@ -225,7 +226,7 @@ fn searched_once(
                 best.iterations,
                 best.modelled.then_some(best.sigma),
                 f.stage1_iterations,
-                BackendOut::of(evaluator),
+                backend.clone(),
             );
             // (a fit the likelihood refined to a noise too small for the model to matter
             // is a precise one: the polish passes it by)
