@@ -177,10 +177,11 @@ pub fn choose(
     let scored = Sample::new(&sample, viewpoint, false);
     let bic = |r: &FitReport| {
         let candidate = norm.candidate(&r.fitted.0, &r.fitted.1);
-        let nll = least_value(
-            |ln_sigma| scored.score(&candidate, ln_sigma.exp()),
-            lo.ln(),
-            hi.ln(),
+        let nll = least_score(
+            |sigma| scored.score(&candidate, sigma),
+            scored.continued_below(),
+            lo,
+            hi,
         );
         let k = if is_superellipsoid(&r.shape) {
             SUPERELLIPSOID_PARAMETERS
@@ -247,6 +248,30 @@ pub fn choose(
         }),
     };
     chosen
+}
+
+/// The least of a fit's `score` (a function of sigma) on [lo, hi]. Below `floor`, where
+/// it has one, the score is its thin-noise continuation from the floor (a line in ln
+/// sigma, [`super::search::continued_below_floor`]), least at `lo`; above it, the noise
+/// model's, unimodal, searched by [`least_value`] unless it rises from the floor. (Brent's
+/// method over the whole bracket would settle in either of the two dips, and two fits
+/// could be weighed in different ones.)
+fn least_score(score: impl Fn(f64) -> f64, floor: Option<f64>, lo: f64, hi: f64) -> f64 {
+    let above = |lo: f64| least_value(|ln_sigma| score(ln_sigma.exp()), lo.ln(), hi.ln());
+    let Some(floor) = floor.filter(|&f| lo < f) else {
+        return above(lo);
+    };
+    if hi <= floor {
+        return score(lo);
+    }
+    let at_floor = score(floor);
+    let below = super::search::continued_below_floor(at_floor, lo);
+    let rises = score(floor * (2.0 * SIGMA_TOLERANCE).exp()) >= at_floor;
+    if rises {
+        below
+    } else {
+        below.min(above(floor))
+    }
 }
 
 /// The least value of a unimodal `f` on [lo, hi] by Brent's method: parabolas through the
@@ -324,6 +349,46 @@ fn least_value(f: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A score continued below the floor as the sample's is: its least is found in the
+    /// lower of its two dips (the bracket's low end, or the noise model's own above the
+    /// floor), and a score that rises from the floor costs two evaluations.
+    #[test]
+    fn the_least_score_is_the_lower_of_its_two_dips() {
+        let floor = crate::fit::search::SIGMA_FLOOR;
+        let evaluations = std::cell::Cell::new(0);
+        // the noise model's shape above the floor, least at s
+        let score = |s: f64| {
+            let evaluations = &evaluations;
+            move |sigma: f64| {
+                evaluations.set(evaluations.get() + 1);
+                let at = |sigma: f64| sigma.ln() + s * s / (2.0 * sigma * sigma);
+                crate::fit::search::continued_below_floor(at(sigma.max(floor)), sigma)
+            }
+        };
+        let (lo, hi) = (floor / 10.0, floor * 40.0);
+        // noise four times the floor: its own dip is deeper than the line's end
+        let s = 4.0 * floor;
+        let own = s.ln() + 0.5;
+        let least = least_score(score(s), Some(floor), lo, hi);
+        let line_end = floor.ln() + s * s / (2.0 * floor * floor) - (floor / lo).ln();
+        assert!(
+            own < line_end && (least - own).abs() < 1e-4,
+            "{least} {own}"
+        );
+        // noise at a fifth of the floor: the score rises from it, least at lo
+        let s = 0.2 * floor;
+        evaluations.set(0);
+        let least = least_score(score(s), Some(floor), lo, hi);
+        let at_lo = floor.ln() + 0.02 - (floor / lo).ln();
+        assert!((least - at_lo).abs() < 1e-12, "{least} {at_lo}");
+        assert_eq!(evaluations.get(), 2);
+        // noise a little over the floor: the line's end is the lower dip
+        let s = 1.3 * floor;
+        let least = least_score(score(s), Some(floor), lo, hi);
+        let at_lo = floor.ln() + 0.5 * 1.69 - (floor / lo).ln();
+        assert!((least - at_lo).abs() < 1e-12, "{least} {at_lo}");
+    }
 
     /// On a parabola, and on the shape of a noise model's negative log-likelihood in ln
     /// sigma (ln sigma + s² / 2 sigma², least at ln s), within the tolerance's value and

@@ -186,8 +186,20 @@ impl Sample {
             return self.distance_score(candidate, sigma);
         }
         let at_floor = objective::value_on(&self.data(), candidate, sigma.max(SIGMA_FLOOR), grid);
-        at_floor - (SIGMA_FLOOR / sigma.max(1e-9)).ln().max(0.0)
+        continued_below_floor(at_floor, sigma)
     }
+
+    /// Where [`Sample::score`] is continued below a sigma from its value there:
+    /// [`SIGMA_FLOOR`] for the noise model's score, none for the distances' alone.
+    pub(super) fn continued_below(&self) -> Option<f64> {
+        (!self.distances_only).then_some(SIGMA_FLOOR)
+    }
+}
+
+/// The score at `sigma` from its value at [`SIGMA_FLOOR`]: below the floor, its
+/// thin-noise limit (a line in ln sigma); at and above it, that value.
+pub(super) fn continued_below_floor(at_floor: f64, sigma: f64) -> f64 {
+    at_floor - (SIGMA_FLOOR / sigma.max(1e-9)).ln().max(0.0)
 }
 
 /// A candidate as the search holds it: where it is, its noise and how likely it is.
