@@ -615,7 +615,7 @@ fn report(
     backend: BackendOut,
 ) -> FitReport {
     let (shape, pose) = p.norm.to_world(candidate);
-    let mut quality = quality(&shape, &pose, p.points);
+    let mut quality = report::quality_on(&shape, &pose, p.points, report::QUALITY_SAMPLE);
     // the noise model's sigma, where it ran, is the better estimate (the first-order
     // distance reads noise off a thin section's curved faces short)
     if let Some(sigma) = modelled_sigma {
