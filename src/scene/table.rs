@@ -59,9 +59,44 @@ pub enum TableOutcome {
 }
 
 pub fn remove_table(pixels: &Pixels, seed: u64) -> TableOutcome {
-    let points = &pixels.points;
-    if points.len() < 3 {
+    let Some(Table {
+        plane,
+        table_points,
+        above,
+        enough,
+    }) = find_table(&pixels.points, seed)
+    else {
         return TableOutcome::NoTable;
+    };
+    let region = largest_region(pixels, &above);
+    if region.len() < enough {
+        return TableOutcome::NothingOnIt {
+            plane,
+            left: region.len(),
+        };
+    }
+    TableOutcome::Removed {
+        plane,
+        table_points,
+        object: region.iter().map(|&i| pixels.points[i]).collect(),
+        object_pixels: region.iter().map(|&i| pixels.pixels[i]).collect(),
+    }
+}
+
+/// A box's table: its plane (normal towards the camera), its points' count, which
+/// points are above it, and how many an object on it must keep.
+struct Table {
+    plane: Plane,
+    table_points: usize,
+    above: Vec<bool>,
+    enough: usize,
+}
+
+/// The plane of [`remove_table`] among `points`: one that holds a good share of them
+/// and has more of the rest on the camera's side than behind it.
+fn find_table(points: &[DVec3], seed: u64) -> Option<Table> {
+    if points.len() < 3 {
+        return None;
     }
     let mut depths: Vec<f64> = points.iter().map(|p| p.z).collect();
     let median = *depths
@@ -73,16 +108,14 @@ pub fn remove_table(pixels: &Pixels, seed: u64) -> TableOutcome {
     let mut left: Vec<usize> = (0..points.len()).collect();
     for _ in 0..MAX_PLANES {
         let candidates: Vec<DVec3> = left.iter().map(|&i| points[i]).collect();
-        let Some(PlaneFit { plane, .. }) = fit_plane(&candidates, tolerance, seed) else {
-            return TableOutcome::NoTable;
-        };
+        let PlaneFit { plane, .. } = fit_plane(&candidates, tolerance, seed)?;
         let inliers: Vec<bool> = points
             .iter()
             .map(|&p| plane.signed_distance(p).abs() <= tolerance)
             .collect();
         let inlier_count = inliers.iter().filter(|&&on| on).count();
         if (inlier_count as f64) < MIN_TABLE_SHARE * points.len() as f64 {
-            return TableOutcome::NoTable;
+            return None;
         }
         let plane = towards_the_camera(plane);
         let above: Vec<bool> = points
@@ -99,21 +132,14 @@ pub fn remove_table(pixels: &Pixels, seed: u64) -> TableOutcome {
             left.retain(|&i| !inliers[i]);
             continue;
         }
-        let region = largest_region(pixels, &above);
-        if region.len() < enough {
-            return TableOutcome::NothingOnIt {
-                plane,
-                left: region.len(),
-            };
-        }
-        return TableOutcome::Removed {
+        return Some(Table {
             plane,
             table_points: inlier_count,
-            object: region.iter().map(|&i| pixels.points[i]).collect(),
-            object_pixels: region.iter().map(|&i| pixels.pixels[i]).collect(),
-        };
+            above,
+            enough,
+        });
     }
-    TableOutcome::NoTable
+    None
 }
 
 /// How a depth frame's object was picked out of it.
@@ -180,8 +206,10 @@ pub fn depth_object(
 pub const TABLE_BESIDE_PAD: f64 = 0.1;
 
 /// The table a masked object stands on: found as in a detector's box ([`remove_table`])
-/// in the bounding box of the object's pixels widened by [`TABLE_BESIDE_PAD`], read from
-/// `image` without the mask; None where that box holds no table with something on it.
+/// among every [`TABLE_BESIDE_STRIDE`]-th row and column of the bounding box of the
+/// object's pixels widened by [`TABLE_BESIDE_PAD`], read from `image` without the mask;
+/// None where that box holds no table with enough points above it. (The mask is the
+/// object: no region of the box need be found, and a plane needs no more pixels.)
 pub fn table_beside(
     image: &DepthImage,
     options: &DepthOptions,
@@ -192,11 +220,22 @@ pub fn table_beside(
         roi: Some(widened_box(&object.pixels, TABLE_BESIDE_PAD)?),
         ..options.clone()
     };
-    match remove_table(&back_project_pixels(image, &around, None).ok()?, seed) {
-        TableOutcome::Removed { plane, .. } => Some(plane),
-        _ => None,
-    }
+    let read = back_project_pixels(image, &around, None).ok()?;
+    let points: Vec<DVec3> = read
+        .points
+        .iter()
+        .zip(&read.pixels)
+        .filter(|(_, (u, v))| u % TABLE_BESIDE_STRIDE == 0 && v % TABLE_BESIDE_STRIDE == 0)
+        .map(|(p, _)| *p)
+        .collect();
+    let table = find_table(&points, seed)?;
+    let above = table.above.iter().filter(|&&a| a).count();
+    (above >= table.enough).then_some(table.plane)
 }
+
+/// [`table_beside`] reads every this-many-th row and column of its box: a quarter of a
+/// box of a hundred thousand pixels holds the plane as well.
+pub const TABLE_BESIDE_STRIDE: u32 = 2;
 
 /// The bounding box of `pixels` widened by `pad` of its width and height on every side
 /// (reading it clips it to the image); None for no pixels.
