@@ -198,6 +198,21 @@ pub fn fit(
         .expect("one result per cloud")
 }
 
+/// The most points of a cloud the fit reads: a larger one (a depth mask's tens of
+/// thousands) is thinned to an even stride of at most this many. The search samples a
+/// few thousand of them and the report [`report::QUALITY_SAMPLE`]; the rest would cost
+/// the screening, the setting aside of isolated points and the preparation their time
+/// and tell the fit nothing.
+pub const MAX_FIT_POINTS: usize = 16_000;
+
+/// An even stride of at most [`MAX_FIT_POINTS`] of `points`; None where they are fewer.
+fn thinned(points: &[DVec3]) -> Option<Vec<DVec3>> {
+    (points.len() > MAX_FIT_POINTS).then(|| {
+        let stride = points.len().div_ceil(MAX_FIT_POINTS);
+        points.iter().step_by(stride).copied().collect()
+    })
+}
+
 /// Fits many clouds together: the stage-1 starts of every cloud are solved in lockstep,
 /// one batched evaluator call per solver iteration for all of them (one dispatch on the
 /// GPU), then the stage-2 finalists of every cloud likewise. Clouds whose options give
@@ -218,25 +233,35 @@ pub fn fit_batch(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
-    // points far from every other set aside first: the screen and the fit see the rest
-    // (with the time each took, where it ran)
-    let cleaned: Vec<(Option<Vec<DVec3>>, Option<f64>)> = clouds
+    // a large cloud thinned to an even stride, then the points far from every other set
+    // aside: the screen and the fit see the rest (with the time the setting aside took,
+    // where it ran)
+    let cleaned: Vec<(Option<Vec<DVec3>>, usize, Option<f64>)> = clouds
         .iter()
         .map(|(points, o)| {
             // (the paper's procedure is the baseline as published: it keeps every point)
-            if o.method == Method::Paper || o.skip.contains(&Stage::SetAsideIsolatedPoints) {
-                return (None, None);
+            if o.method == Method::Paper {
+                return (None, points.len(), None);
+            }
+            let thinned = thinned(points);
+            let read = thinned.as_ref().map_or(points.len(), Vec::len);
+            if o.skip.contains(&Stage::SetAsideIsolatedPoints) {
+                return (thinned, read, None);
             }
             let start = Instant::now();
-            let kept = isolated::without_isolated(points);
-            (kept, Some(start.elapsed().as_secs_f64() * 1e3))
+            let kept = isolated::without_isolated(thinned.as_deref().unwrap_or(points));
+            (
+                kept.or(thinned),
+                read,
+                Some(start.elapsed().as_secs_f64() * 1e3),
+            )
         })
         .collect();
     let inputs: Vec<usize> = clouds.iter().map(|(points, _)| points.len()).collect();
     let clouds: Vec<(&[DVec3], &FitOptions)> = clouds
         .iter()
         .zip(&cleaned)
-        .map(|((points, o), (kept, _))| (kept.as_deref().unwrap_or(points), *o))
+        .map(|((points, o), (kept, _, _))| (kept.as_deref().unwrap_or(points), *o))
         .collect();
     let clouds = &clouds[..];
     // each cloud with an object in it: its model's fit, or both models' for auto
@@ -273,12 +298,13 @@ pub fn fit_batch(
         .par_iter()
         .zip(per_cloud)
         .zip(inputs)
-        .zip(cleaned.par_iter().map(|(_, spent)| *spent))
-        .map(|((((points, _), fitted), input), spent)| {
+        .zip(cleaned.par_iter().map(|(_, read, spent)| (*read, *spent)))
+        .map(|((((points, _), fitted), input), (read, spent))| {
             let (options, reports) = fitted?;
             let with_input = |mut r: FitReport| {
-                r.points.isolated = input - points.len();
+                r.points.isolated = read - points.len();
                 r.points.input = input;
+                r.points.thinned_to = (read < input).then_some(read);
                 if let Some(spent) = spent {
                     r.timing_ms.total += spent;
                     r.timing_ms
@@ -681,6 +707,7 @@ fn report(
             stage2: p.stage2_pts.len(),
             polish: None,
             isolated: 0,
+            thinned_to: None,
         },
         // set by the search
         search: None,

@@ -88,10 +88,14 @@ pub struct PointsOut {
     /// misfit's; see [`super::FitOptions::polish_points`])
     #[serde(skip_serializing_if = "Option::is_none")]
     pub polish: Option<usize>,
-    /// the input points far from every other, set aside before the fit
+    /// the points far from every other, set aside before the fit
     /// ([`super::isolated`]): the fit and its quality are the other points'
     #[serde(skip_serializing_if = "is_zero")]
     pub isolated: usize,
+    /// the even stride of the input the fit read, where the input held more than
+    /// [`super::MAX_FIT_POINTS`] points (`isolated` counts among these)
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub thinned_to: Option<usize>,
 }
 
 fn is_zero(n: &usize) -> bool {
