@@ -157,6 +157,56 @@ fn gpu_and_cpu_fits_agree_on_a_clean_cloud() {
     );
 }
 
+/// A dense cloud (a depth mask's tens of thousands of points) is fitted on an even
+/// stride of at most `MAX_FIT_POINTS`, its strays set aside among those, and the fit is
+/// the ring's; the report says what it read.
+#[test]
+fn a_dense_cloud_is_fitted_on_a_stride_of_it() {
+    use glam::DQuat;
+    use rand::Rng;
+    use supertoroid::fit::MAX_FIT_POINTS;
+    use supertoroid::model::{Pose, Shape};
+    use supertoroid::synth;
+    let shape = Shape::new(0.05, 0.04, 0.02, 2.0, 0.6, 1.0);
+    let pose = Pose::new(DQuat::from_rotation_x(0.5), DVec3::new(0.02, -0.01, 0.6));
+    let mut rng = synth::rng(11);
+    let mut points = synth::sample_surface(&shape, &pose, 40_000, &mut rng);
+    synth::add_noise(&mut points, 0.0003, &mut rng);
+    for _ in 0..200 {
+        let offset = DVec3::new(
+            rng.random_range(-0.4..0.4),
+            rng.random_range(-0.4..0.4),
+            rng.random_range(-0.4..0.4),
+        );
+        points.push(pose.translation + offset);
+    }
+    let report = fit(
+        &mut CpuEvaluator::new(),
+        &points,
+        &FitOptions {
+            viewpoint: supertoroid::fit::Viewpoint::None,
+            model: supertoroid::fit::Model::Supertoroid,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let read = report.points.thinned_to.expect("thinned");
+    assert!(
+        (MAX_FIT_POINTS / 2..=MAX_FIT_POINTS).contains(&read),
+        "{:?}",
+        report.points
+    );
+    assert_eq!(report.points.input, points.len());
+    // (a stride of the strays is among the points read)
+    assert!(
+        (20..=read / 100).contains(&report.points.isolated),
+        "{:?}",
+        report.points
+    );
+    let e = compare((&shape, &pose), (&report.fitted.0, &report.fitted.1));
+    assert!(e.success(), "{e:?}");
+}
+
 #[test]
 fn bad_clouds_are_rejected_with_a_reason() {
     let mut ev = CpuEvaluator::new();
