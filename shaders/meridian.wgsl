@@ -184,6 +184,13 @@ fn canonical(c: Candidate, p: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(dot(c.c0.xyz, d), dot(c.c1.xyz, d), dot(c.c2.xyz, d));
 }
 
+// Whether q (canonical) lies beyond the candidate's bounding box, |x| <= a1(1+a4),
+// |y| <= a2(1+a4), |z| <= a3, and so outside the solid.
+fn beyond_the_box(c: Candidate, q: vec3<f32>) -> bool {
+    let half = vec3<f32>(c.a.x * (1.0 + c.a.w), c.a.y * (1.0 + c.a.w), c.a.z);
+    return any(abs(q) > half);
+}
+
 // The residual of a point of kind w (see `points`): a free-space point counts only inside.
 fn residual_of(r: f32, w: f32) -> f32 {
     if (w == 2.0) {
@@ -254,6 +261,11 @@ fn normal_equations(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workg
             continue;
         }
         let q = canonical(c, p.xyz);
+        // a free-space point beyond the bounding box is outside: no residual, told
+        // without its distance
+        if (p.w == 2.0 && beyond_the_box(c, q)) {
+            continue;
+        }
         let ev = meridian(q, c.a, c.e, true);
         // translation: dq/dt = -R^T, so dr/dt = -R dr/dq; rotation increment: dr/dd = dr/dq x q
         let dt = -(c.c0.xyz * ev.dq.x + c.c1.xyz * ev.dq.y + c.c2.xyz * ev.dq.z);
@@ -317,7 +329,12 @@ fn costs(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wi
         if (p.w == 0.0) {
             continue;
         }
-        let ev = meridian(canonical(c, p.xyz), c.a, c.e, false);
+        let q = canonical(c, p.xyz);
+        // (a free-space point beyond the bounding box adds nothing)
+        if (p.w == 2.0 && beyond_the_box(c, q)) {
+            continue;
+        }
+        let ev = meridian(q, c.a, c.e, false);
         if (finite(ev.r)) {
             acc += vec2<f32>(loss_of(residual_of(ev.r, p.w)).x, select(1.0, 0.0, p.w == 2.0));
         }

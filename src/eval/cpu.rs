@@ -6,6 +6,13 @@ use crate::model::{meridian_distance, meridian_residual_with_gradient};
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
+/// Whether a point in a shape's canonical frame lies beyond its bounding box
+/// (`half`, [`crate::model::Shape::half_extents`]), and so outside the solid: a
+/// free-space point there has a residual of zero, told without its distance.
+fn beyond_the_box(half: DVec3, q: DVec3) -> bool {
+    q.abs().cmpgt(half).any()
+}
+
 /// The f64 reference evaluator, parallel over points with rayon.
 #[derive(Default)]
 pub struct CpuEvaluator {
@@ -122,14 +129,15 @@ impl Evaluator for CpuEvaluator {
         let rotations: Vec<DMat3> = candidates.iter().map(|c| c.pose.matrix()).collect();
         let partials = self.per_chunk(sets, |k, chunk, surface| {
             let (c, rotation) = (&candidates[k], &rotations[k]);
+            let half = c.shape.half_extents();
             let mut ne = NormalEquations::zero();
             for (i, p) in chunk.iter().enumerate() {
                 let free_space = i >= surface;
-                // most free-space points lie outside: the distance alone tells, at a
-                // fraction of the cost of the Jacobian row
+                // most free-space points lie outside: the bounding box or the distance
+                // alone tells, at a fraction of the cost of the Jacobian row
                 if free_space {
                     let q = rotation.transpose() * (*p - c.pose.translation);
-                    if meridian_distance(&c.shape, q).signed >= 0.0 {
+                    if beyond_the_box(half, q) || meridian_distance(&c.shape, q).signed >= 0.0 {
                         continue;
                     }
                 }
@@ -191,13 +199,19 @@ impl Evaluator for CpuEvaluator {
             .collect();
         let partials = self.per_chunk(sets, |k, chunk, surface| {
             let c = &candidates[k];
+            let half = c.shape.half_extents();
             chunk
                 .iter()
                 .enumerate()
                 .fold((0.0, 0u64), |(cost, count), (i, p)| {
                     let free_space = i >= surface;
-                    let r =
-                        meridian_distance(&c.shape, inverses[k] * (*p - c.pose.translation)).signed;
+                    let q = inverses[k] * (*p - c.pose.translation);
+                    // (a free-space point outside the box adds nothing: told without its
+                    // distance)
+                    if free_space && beyond_the_box(half, q) {
+                        return (cost, count);
+                    }
+                    let r = meridian_distance(&c.shape, q).signed;
                     if r.is_finite() {
                         let r = point_residual(r, free_space);
                         (cost + loss.eval(r).0, count + u64::from(!free_space))

@@ -323,6 +323,41 @@ mod tests {
         assert!(depth(0.55, 0.19) < 1e-3 * 0.05, "{}", depth(0.55, 0.19));
     }
 
+    /// Nothing beyond the bounding box is inside the solid: the meridian distance of a
+    /// point past any of the box's faces is never negative, whatever the shape (the
+    /// evaluators skip free-space points there).
+    #[test]
+    fn no_point_beyond_the_bounding_box_is_inside() {
+        use rand::Rng;
+        let mut rng = crate::synth::rng(3);
+        for _ in 0..2000 {
+            let shape = Shape::new(
+                rng.random_range(0.01..0.2),
+                rng.random_range(0.01..0.2),
+                rng.random_range(0.01..0.2),
+                if rng.random_bool(0.3) {
+                    0.0
+                } else {
+                    rng.random_range(0.0..3.0)
+                },
+                rng.random_range(0.1..1.9),
+                rng.random_range(0.1..1.9),
+            );
+            let half = shape.half_extents();
+            // just past one face, anywhere across the others (and beyond them)
+            let axis = rng.random_range(0..3);
+            let mut q = DVec3::new(
+                rng.random_range(-1.5..1.5) * half.x,
+                rng.random_range(-1.5..1.5) * half.y,
+                rng.random_range(-1.5..1.5) * half.z,
+            );
+            let past = half[axis] * rng.random_range(1.0001..1.2);
+            q[axis] = if rng.random_bool(0.5) { past } else { -past };
+            let signed = crate::model::meridian_distance(&shape, q).signed;
+            assert!(signed >= 0.0, "{shape:?} {q} {signed}");
+        }
+    }
+
     #[test]
     fn a_composed_pose_maps_a_point_as_its_two_poses_in_turn() {
         let outer = Pose::new(DQuat::from_rotation_x(0.7), DVec3::new(1.0, -2.0, 0.5));
