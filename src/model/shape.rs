@@ -328,21 +328,19 @@ mod tests {
     /// evaluators skip free-space points there).
     #[test]
     fn no_point_beyond_the_bounding_box_is_inside() {
+        use crate::suite::ground_truth::{random_shape, random_superellipsoid};
         use rand::Rng;
         let mut rng = crate::synth::rng(3);
-        for _ in 0..2000 {
-            let shape = Shape::new(
-                rng.random_range(0.01..0.2),
-                rng.random_range(0.01..0.2),
-                rng.random_range(0.01..0.2),
-                if rng.random_bool(0.3) {
-                    0.0
-                } else {
-                    rng.random_range(0.0..3.0)
+        for i in 0..2000 {
+            // superellipsoids, rings and apples (0 < a4 < 1)
+            let shape = match i % 3 {
+                0 => random_superellipsoid(&mut rng).0,
+                1 => random_shape(&mut rng).0,
+                _ => Shape {
+                    a4: rng.random_range(0.05..1.0),
+                    ..random_shape(&mut rng).0
                 },
-                rng.random_range(0.1..1.9),
-                rng.random_range(0.1..1.9),
-            );
+            };
             let half = shape.half_extents();
             // just past one face, anywhere across the others (and beyond them)
             let axis = rng.random_range(0..3);
