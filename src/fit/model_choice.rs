@@ -179,7 +179,7 @@ pub fn choose(
         let candidate = norm.candidate(&r.fitted.0, &r.fitted.1);
         let nll = least_score(
             |sigma| scored.score(&candidate, sigma),
-            scored.continued_below(),
+            scored.continued_below_floor(),
             lo,
             hi,
         );
@@ -250,17 +250,19 @@ pub fn choose(
     chosen
 }
 
-/// The least of a fit's `score` (a function of sigma) on [lo, hi]. Below `floor`, where
-/// it has one, the score is its thin-noise continuation from the floor (a line in ln
-/// sigma, [`super::search::continued_below_floor`]), least at `lo`; above it, the noise
-/// model's, unimodal, searched by [`least_value`] unless it rises from the floor. (Brent's
-/// method over the whole bracket would settle in either of the two dips, and two fits
-/// could be weighed in different ones.)
-fn least_score(score: impl Fn(f64) -> f64, floor: Option<f64>, lo: f64, hi: f64) -> f64 {
+/// The least of a fit's `score` (a function of sigma) on [lo, hi]. Where it is
+/// `continued` below the noise model's floor ([`super::search::SIGMA_FLOOR`]), the score
+/// there is its thin-noise continuation (a line in ln sigma,
+/// [`super::search::continued_below_floor`]), least at `lo`; above the floor it is the
+/// noise model's, unimodal, searched by [`least_value`] unless it rises from the floor.
+/// (Brent's method over the whole bracket would settle in either of the two dips, and
+/// two fits could be weighed in different ones.)
+fn least_score(score: impl Fn(f64) -> f64, continued: bool, lo: f64, hi: f64) -> f64 {
     let above = |lo: f64| least_value(|ln_sigma| score(ln_sigma.exp()), lo.ln(), hi.ln());
-    let Some(floor) = floor.filter(|&f| lo < f) else {
+    let floor = super::search::SIGMA_FLOOR;
+    if !continued || lo >= floor {
         return above(lo);
-    };
+    }
     if hi <= floor {
         return score(lo);
     }
@@ -370,7 +372,7 @@ mod tests {
         // noise four times the floor: its own dip is deeper than the line's end
         let s = 4.0 * floor;
         let own = s.ln() + 0.5;
-        let least = least_score(score(s), Some(floor), lo, hi);
+        let least = least_score(score(s), true, lo, hi);
         let line_end = floor.ln() + s * s / (2.0 * floor * floor) - (floor / lo).ln();
         assert!(
             own < line_end && (least - own).abs() < 1e-4,
@@ -379,13 +381,13 @@ mod tests {
         // noise at a fifth of the floor: the score rises from it, least at lo
         let s = 0.2 * floor;
         evaluations.set(0);
-        let least = least_score(score(s), Some(floor), lo, hi);
+        let least = least_score(score(s), true, lo, hi);
         let at_lo = floor.ln() + 0.02 - (floor / lo).ln();
         assert!((least - at_lo).abs() < 1e-12, "{least} {at_lo}");
         assert_eq!(evaluations.get(), 2);
         // noise a little over the floor: the line's end is the lower dip
         let s = 1.3 * floor;
-        let least = least_score(score(s), Some(floor), lo, hi);
+        let least = least_score(score(s), true, lo, hi);
         let at_lo = floor.ln() + 0.5 * 1.69 - (floor / lo).ln();
         assert!((least - at_lo).abs() < 1e-12, "{least} {at_lo}");
     }

@@ -189,10 +189,10 @@ impl Sample {
         continued_below_floor(at_floor, sigma)
     }
 
-    /// Where [`Sample::score`] is continued below a sigma from its value there:
-    /// [`SIGMA_FLOOR`] for the noise model's score, none for the distances' alone.
-    pub(super) fn continued_below(&self) -> Option<f64> {
-        (!self.distances_only).then_some(SIGMA_FLOOR)
+    /// Whether [`Sample::score`] is continued below [`SIGMA_FLOOR`] from its value there
+    /// ([`continued_below_floor`]): the noise model's is, the distances' alone are not.
+    pub(super) fn continued_below_floor(&self) -> bool {
+        !self.distances_only
     }
 }
 
