@@ -213,6 +213,45 @@ fn thinned(points: &[DVec3]) -> Option<Vec<DVec3>> {
     })
 }
 
+/// A cloud as the screen and the fit see it: thinned where large ([`thinned`]), its
+/// points far from every other set aside ([`isolated`]).
+struct Cleaned {
+    /// the points kept; None where they are the input's
+    kept: Option<Vec<DVec3>>,
+    /// the points read: the input's, or the stride thinned to
+    read: usize,
+    /// the time the setting aside took, where it ran
+    isolated_ms: Option<f64>,
+}
+
+/// [`Cleaned`] for one cloud.
+fn cleaned(points: &[DVec3], o: &FitOptions) -> Cleaned {
+    // (the paper's procedure is the baseline as published: it keeps every point)
+    if o.method == Method::Paper {
+        return Cleaned {
+            kept: None,
+            read: points.len(),
+            isolated_ms: None,
+        };
+    }
+    let thinned = thinned(points);
+    let read = thinned.as_ref().map_or(points.len(), Vec::len);
+    if o.skip.contains(&Stage::SetAsideIsolatedPoints) {
+        return Cleaned {
+            kept: thinned,
+            read,
+            isolated_ms: None,
+        };
+    }
+    let start = Instant::now();
+    let kept = isolated::without_isolated(thinned.as_deref().unwrap_or(points));
+    Cleaned {
+        kept: kept.or(thinned),
+        read,
+        isolated_ms: Some(start.elapsed().as_secs_f64() * 1e3),
+    }
+}
+
 /// Fits many clouds together: the stage-1 starts of every cloud are solved in lockstep,
 /// one batched evaluator call per solver iteration for all of them (one dispatch on the
 /// GPU), then the stage-2 finalists of every cloud likewise. Clouds whose options give
@@ -233,35 +272,13 @@ pub fn fit_batch(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
-    // a large cloud thinned to an even stride, then the points far from every other set
-    // aside: the screen and the fit see the rest (with the time the setting aside took,
-    // where it ran)
-    let cleaned: Vec<(Option<Vec<DVec3>>, usize, Option<f64>)> = clouds
-        .iter()
-        .map(|(points, o)| {
-            // (the paper's procedure is the baseline as published: it keeps every point)
-            if o.method == Method::Paper {
-                return (None, points.len(), None);
-            }
-            let thinned = thinned(points);
-            let read = thinned.as_ref().map_or(points.len(), Vec::len);
-            if o.skip.contains(&Stage::SetAsideIsolatedPoints) {
-                return (thinned, read, None);
-            }
-            let start = Instant::now();
-            let kept = isolated::without_isolated(thinned.as_deref().unwrap_or(points));
-            (
-                kept.or(thinned),
-                read,
-                Some(start.elapsed().as_secs_f64() * 1e3),
-            )
-        })
-        .collect();
+    // (the screen and the fit see each cloud thinned and its stray points set aside)
+    let cleaned: Vec<Cleaned> = clouds.iter().map(|(p, o)| cleaned(p, o)).collect();
     let inputs: Vec<usize> = clouds.iter().map(|(points, _)| points.len()).collect();
     let clouds: Vec<(&[DVec3], &FitOptions)> = clouds
         .iter()
         .zip(&cleaned)
-        .map(|((points, o), (kept, _, _))| (kept.as_deref().unwrap_or(points), *o))
+        .map(|((points, o), c)| (c.kept.as_deref().unwrap_or(points), *o))
         .collect();
     let clouds = &clouds[..];
     // each cloud with an object in it: its model's fit, or both models' for auto
@@ -298,7 +315,7 @@ pub fn fit_batch(
         .par_iter()
         .zip(per_cloud)
         .zip(inputs)
-        .zip(cleaned.par_iter().map(|(_, read, spent)| (*read, *spent)))
+        .zip(cleaned.par_iter().map(|c| (c.read, c.isolated_ms)))
         .map(|((((points, _), fitted), input), (read, spent))| {
             let (options, reports) = fitted?;
             let with_input = |mut r: FitReport| {
