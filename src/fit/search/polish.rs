@@ -26,13 +26,12 @@ pub const POLISH_DUAL_MARGIN: f64 = 0.0;
 /// other reading (2 - eps2) is within the suite's eps tolerance of 0.15 of it.
 pub const DUAL_MIN_ROUNDNESS_GAP: f64 = 0.07;
 /// The other reading goes on to convergence only when it is more likely than the model's
-/// fit after this many iterations. On fresh sets 2000000-2030000 (camera frame, no
-/// options, 720 cases, 367 other readings) the readings more likely after 5 iterations
-/// were so after 2 as well, and no other; the other readings that converge to a tie lag by
-/// 1-2 nats a point after 5 iterations, so 5 did not catch them either. Interleaved on
-/// fresh sets (`docs/fit.md`): 2 against 5 changed no success of 900 and took the views'
-/// per-case time down 4-8%.
-const DUAL_FIRST_ITERATIONS: usize = 2;
+/// fit after this many iterations. Interleaved on fresh sets 1020000 and 1030000 (camera
+/// frame, no options, 360 cases): 5 against 8 changed no case and took the polish's mean
+/// from 63 to 56 ms. With a 500-point stage 2, 3 iterations lost a case of sets
+/// 950000/960000, and leaving the other reading out (a polish's mean of 39 ms) lost 3 of
+/// sets 930000/940000's 360 cases.
+const DUAL_FIRST_ITERATIONS: usize = 5;
 
 /// Polishes each modelled fit of `results` (see the module docs) unless its time so far
 /// is over its [`FitOptions::time_budget_ms`]. The polished fit replaces the fit unless
