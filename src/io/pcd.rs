@@ -56,6 +56,105 @@ impl PcdHeader {
 
     /// Reads and checks the header (see the module docs).
     pub fn scan(bytes: &[u8], limits: ReadLimits) -> Result<Self, CloudError> {
+        let lines = HeaderLines::read(bytes)?;
+        let FieldTable {
+            fields,
+            sizes,
+            types,
+            counts,
+        } = lines.field_table()?;
+        let (width, height, points) = lines.dimensions()?;
+        check_count(points, limits)?;
+        let header = PcdHeader {
+            fields,
+            sizes,
+            types,
+            counts,
+            width,
+            height,
+            points,
+            viewpoint: lines.viewpoint(),
+            data: lines.data,
+            data_offset: lines.data_offset,
+        };
+        header.check_coordinates()?;
+        header.check_body(&bytes[header.data_offset..])?;
+        Ok(header)
+    }
+
+    /// x, y and z are fields of one value each.
+    fn check_coordinates(&self) -> Result<(), CloudError> {
+        for axis in ["x", "y", "z"] {
+            let i = self
+                .field_index(axis)
+                .ok_or_else(|| bad(format!("no {axis} field (FIELDS {:?})", self.fields)))?;
+            if self.counts[i] != 1 {
+                return Err(bad(format!("field {axis} has COUNT {}", self.counts[i])));
+            }
+        }
+        Ok(())
+    }
+
+    /// The data section `body` holds what the header promises: binary data POINTS
+    /// records long, a compressed block whose sizes match the bytes present and the
+    /// records.
+    fn check_body(&self, body: &[u8]) -> Result<(), CloudError> {
+        let points = self.points;
+        let expected = (points as usize).saturating_mul(self.record_size());
+        match self.data.as_str() {
+            "ascii" => {}
+            "binary" => {
+                if body.len() < expected {
+                    return Err(bad(format!(
+                        "truncated binary data: {} bytes for {points} points of {} bytes",
+                        body.len(),
+                        self.record_size()
+                    )));
+                }
+            }
+            "binary_compressed" => {
+                if body.len() < 8 {
+                    return Err(bad("truncated binary_compressed block sizes"));
+                }
+                let compressed = u32::from_le_bytes(body[0..4].try_into().unwrap()) as usize;
+                let uncompressed = u32::from_le_bytes(body[4..8].try_into().unwrap()) as usize;
+                if compressed > body.len() - 8 {
+                    return Err(bad(format!(
+                        "truncated compressed data: the block claims {compressed} bytes, {} present",
+                        body.len() - 8
+                    )));
+                }
+                if uncompressed != expected {
+                    return Err(bad(format!(
+                        "the compressed block decompresses to {uncompressed} bytes, but {points} points of {} bytes need {expected}",
+                        self.record_size()
+                    )));
+                }
+            }
+            other => return Err(bad(format!("unknown DATA kind {other:?}"))),
+        }
+        Ok(())
+    }
+}
+
+/// The header's columns, one entry per field.
+struct FieldTable {
+    fields: Vec<String>,
+    sizes: Vec<usize>,
+    types: Vec<char>,
+    counts: Vec<usize>,
+}
+
+/// The header's lines up to DATA: each key (upper case) with its values, DATA's kind
+/// (lower case) and where the data section starts.
+struct HeaderLines {
+    keys: std::collections::HashMap<String, Vec<String>>,
+    data: String,
+    data_offset: usize,
+}
+
+impl HeaderLines {
+    fn read(bytes: &[u8]) -> Result<Self, CloudError> {
         let mut offset = 0;
         let mut keys: std::collections::HashMap<String, Vec<String>> = Default::default();
         let data = loop {
@@ -86,27 +185,42 @@ impl PcdHeader {
             }
             keys.insert(key, values);
         };
-        let list = |key: &str| -> Result<Vec<String>, CloudError> {
-            keys.get(key)
-                .cloned()
-                .ok_or_else(|| bad(format!("the header has no {key} line")))
-        };
-        let number = |key: &str| -> Result<u64, CloudError> {
-            let v = list(key)?;
-            v.first()
-                .and_then(|s| s.parse::<u64>().ok())
-                .ok_or_else(|| bad(format!("{key} is not a non-negative integer: {v:?}")))
-        };
-        let fields = list("FIELDS")?;
+        Ok(Self {
+            keys,
+            data,
+            data_offset: offset,
+        })
+    }
+
+    fn list(&self, key: &str) -> Result<Vec<String>, CloudError> {
+        self.keys
+            .get(key)
+            .cloned()
+            .ok_or_else(|| bad(format!("the header has no {key} line")))
+    }
+
+    fn number(&self, key: &str) -> Result<u64, CloudError> {
+        let v = self.list(key)?;
+        v.first()
+            .and_then(|s| s.parse::<u64>().ok())
+            .ok_or_else(|| bad(format!("{key} is not a non-negative integer: {v:?}")))
+    }
+
+    /// FIELDS, SIZE, TYPE and COUNT (1 each where absent), as long as each other, every
+    /// field's type and size one the reader decodes.
+    fn field_table(&self) -> Result<FieldTable, CloudError> {
+        let fields = self.list("FIELDS")?;
         let n = fields.len();
-        let sizes = list("SIZE")?
+        let sizes = self
+            .list("SIZE")?
             .iter()
             .map(|s| {
                 s.parse::<usize>()
                     .map_err(|_| bad(format!("bad SIZE {s:?}")))
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let types = list("TYPE")?
+        let types = self
+            .list("TYPE")?
             .iter()
             .map(|s| {
                 let c = s.to_ascii_uppercase();
@@ -116,7 +230,7 @@ impl PcdHeader {
                 }
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let counts = match keys.get("COUNT") {
+        let counts = match self.keys.get("COUNT") {
             Some(c) => c
                 .iter()
                 .map(|s| {
@@ -147,14 +261,26 @@ impl PcdHeader {
                 )));
             }
         }
-        let width = number("WIDTH")?;
-        let height = keys
+        Ok(FieldTable {
+            fields,
+            sizes,
+            types,
+            counts,
+        })
+    }
+
+    /// WIDTH, HEIGHT (1 where absent) and POINTS (WIDTH·HEIGHT where absent), POINTS
+    /// equal to WIDTH·HEIGHT.
+    fn dimensions(&self) -> Result<(u64, u64, u64), CloudError> {
+        let width = self.number("WIDTH")?;
+        let height = self
+            .keys
             .get("HEIGHT")
-            .map(|_| number("HEIGHT"))
+            .map(|_| self.number("HEIGHT"))
             .transpose()?
             .unwrap_or(1);
-        let points = match keys.get("POINTS") {
-            Some(_) => number("POINTS")?,
+        let points = match self.keys.get("POINTS") {
+            Some(_) => self.number("POINTS")?,
             None => width.saturating_mul(height),
         };
         if width.checked_mul(height) != Some(points) {
@@ -162,74 +288,22 @@ impl PcdHeader {
                 "POINTS {points} does not equal WIDTH {width} x HEIGHT {height}"
             )));
         }
-        check_count(points, limits)?;
-        let viewpoint = keys.get("VIEWPOINT").and_then(|v| {
+        Ok((width, height, points))
+    }
+
+    /// VIEWPOINT's tx ty tz, where the line has three numbers.
+    fn viewpoint(&self) -> Option<DVec3> {
+        self.keys.get("VIEWPOINT").and_then(|v| {
             let t: Vec<f64> = v
                 .iter()
                 .take(3)
                 .map(|x| x.parse().ok())
                 .collect::<Option<_>>()?;
             (t.len() == 3).then(|| DVec3::new(t[0], t[1], t[2]))
-        });
-        let header = PcdHeader {
-            fields,
-            sizes,
-            types,
-            counts,
-            width,
-            height,
-            points,
-            data,
-            data_offset: offset,
-            viewpoint,
-        };
-        for axis in ["x", "y", "z"] {
-            let i = header
-                .field_index(axis)
-                .ok_or_else(|| bad(format!("no {axis} field (FIELDS {:?})", header.fields)))?;
-            if header.counts[i] != 1 {
-                return Err(bad(format!("field {axis} has COUNT {}", header.counts[i])));
-            }
-        }
-        let body = &bytes[offset..];
-        let expected = (points as usize).saturating_mul(header.record_size());
-        match header.data.as_str() {
-            "ascii" => {}
-            "binary" => {
-                if body.len() < expected {
-                    return Err(bad(format!(
-                        "truncated binary data: {} bytes for {points} points of {} bytes",
-                        body.len(),
-                        header.record_size()
-                    )));
-                }
-            }
-            "binary_compressed" => {
-                if body.len() < 8 {
-                    return Err(bad("truncated binary_compressed block sizes"));
-                }
-                let compressed = u32::from_le_bytes(body[0..4].try_into().unwrap()) as usize;
-                let uncompressed = u32::from_le_bytes(body[4..8].try_into().unwrap()) as usize;
-                if compressed > body.len() - 8 {
-                    return Err(bad(format!(
-                        "truncated compressed data: the block claims {compressed} bytes, {} present",
-                        body.len() - 8
-                    )));
-                }
-                if uncompressed != expected {
-                    return Err(bad(format!(
-                        "the compressed block decompresses to {uncompressed} bytes, but {points} points of {} bytes need {expected}",
-                        header.record_size()
-                    )));
-                }
-            }
-            other => return Err(bad(format!("unknown DATA kind {other:?}"))),
-        }
-        Ok(header)
+        })
     }
 }
 
-/// The first value of a PCD field as f64.
 fn field_value(field: &Field) -> Option<f64> {
     Some(match field {
         Field::F32(v) => *v.first()? as f64,
