@@ -326,92 +326,21 @@ pub fn run(
     let mut out = Vec::with_capacity(cases * seeds.len());
     let mut pictures = Vec::new();
     for (seed, i) in seeds.iter().flat_map(|&s| (0..cases).map(move |i| (s, i))) {
-        let (partial, noise, outliers) = category(i);
-        let case_seed = seed + i as u64;
-        let case = make_case(case_seed, partial, noise, outliers);
-        let (points, viewpoint, back) = presented(&case, presentation);
-        let options = FitOptions {
-            seed: case_seed,
-            viewpoint,
-            ..base.clone()
-        };
-        let mut report = match fit(evaluator.as_mut(), &points, &options) {
-            Ok(report) => report,
-            // a true object refused by the object screen is a failed case, not a stop
-            Err(crate::fit::FitError::NoObject(_)) => {
-                out.push(Case::refused(case_seed, partial, noise, outliers));
-                bar.inc(1);
-                continue;
-            }
-            Err(e) => return Err(format!("case {case_seed}: {e}")),
-        };
-        report.fitted.1 = back.compose(&report.fitted.1);
-        let e = compare(
-            (&case.shape, &case.pose),
-            (&report.fitted.0, &report.fitted.1),
-        );
-        if let Some(target) = render
-            && !e.success()
-            && pictures.len() < 6
-        {
-            pictures.push(target.draw(
-                &format!("case-{case_seed}"),
-                &case.points,
-                report.fitted,
-            )?);
-        }
-        out.push(Case {
-            seed: case_seed,
-            partial,
-            noise,
-            outliers,
-            success: e.success(),
-            centre: e.centre,
-            axis_degrees: e.axis_degrees,
-            sizes: e.sizes,
-            a4: e.a4,
-            eps: e.eps,
-            t_total_ms: report.timing_ms.total,
-            noise_ratio: noise * case.shape.size() / case.shape.thinnest_half_axis(),
-            refused: false,
-            uncertain_warning: report.warnings.iter().any(|w| w.starts_with("uncertain")),
-            misfit_warning: report
-                .warnings
-                .iter()
-                .any(|w| w.starts_with("off a precise")),
-            warned: !report.warnings.is_empty(),
-            uncertainty: report
-                .quality
-                .standard_errors
-                .as_ref()
-                .map_or(f64::NAN, |e| e.share_of_tolerance()),
-            attainable: attainable::suite_case(&case, case_seed).unwrap_or(f64::NAN),
-            visible_coverage: report.quality.visible_coverage.unwrap_or(f64::NAN),
-            viewpoint_found: report.viewpoint.source == ViewpointSource::FrameOrigin,
-            from_truth: from_truth
-                .then(|| recovered_from_truth(&case, TruthPoints::All, true, base)),
-        });
+        let (case, picture) = fit_case(
+            evaluator.as_mut(),
+            seed + i as u64,
+            category(i),
+            presentation,
+            from_truth,
+            base,
+            render.filter(|_| pictures.len() < 6),
+        )?;
+        pictures.extend(picture);
+        out.push(case);
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let mut categories = Vec::new();
-    for c in 0..18.min(cases) {
-        let (partial, noise, outliers) = category(c);
-        let members: Vec<&Case> = out
-            .iter()
-            .filter(|k| k.partial == partial && k.noise == noise && k.outliers == outliers)
-            .collect();
-        let successes = members.iter().filter(|k| k.success).count();
-        categories.push(Category {
-            partial,
-            noise,
-            outliers,
-            cases: members.len(),
-            successes,
-            rate: successes as f64 / members.len().max(1) as f64,
-            attainable_rate: mean_attainable(members.iter().copied()),
-        });
-    }
+    let categories = categories(&out, cases);
     let full: Vec<&Case> = out.iter().filter(|c| !c.partial).collect();
     let partial: Vec<&Case> = out.iter().filter(|c| c.partial).collect();
     let partial_with_outliers: Vec<&Case> = partial
@@ -464,6 +393,99 @@ pub fn run(
         cases: out,
         pictures,
     })
+}
+
+/// One case of the suite drawn, presented, fitted and judged, with the picture of a
+/// failed fit where `render` is given.
+fn fit_case(
+    evaluator: &mut dyn crate::eval::Evaluator,
+    case_seed: u64,
+    (partial, noise, outliers): (bool, f64, f64),
+    presentation: Presentation,
+    from_truth: bool,
+    base: &FitOptions,
+    render: Option<&super::RenderTarget>,
+) -> Result<(Case, Option<String>), String> {
+    let case = make_case(case_seed, partial, noise, outliers);
+    let (points, viewpoint, back) = presented(&case, presentation);
+    let options = FitOptions {
+        seed: case_seed,
+        viewpoint,
+        ..base.clone()
+    };
+    let mut report = match fit(evaluator, &points, &options) {
+        Ok(report) => report,
+        // a true object refused by the object screen is a failed case, not a stop
+        Err(crate::fit::FitError::NoObject(_)) => {
+            return Ok((Case::refused(case_seed, partial, noise, outliers), None));
+        }
+        Err(e) => return Err(format!("case {case_seed}: {e}")),
+    };
+    report.fitted.1 = back.compose(&report.fitted.1);
+    let e = compare(
+        (&case.shape, &case.pose),
+        (&report.fitted.0, &report.fitted.1),
+    );
+    let picture = match render {
+        Some(target) if !e.success() => {
+            Some(target.draw(&format!("case-{case_seed}"), &case.points, report.fitted)?)
+        }
+        _ => None,
+    };
+    let judged = Case {
+        seed: case_seed,
+        partial,
+        noise,
+        outliers,
+        success: e.success(),
+        centre: e.centre,
+        axis_degrees: e.axis_degrees,
+        sizes: e.sizes,
+        a4: e.a4,
+        eps: e.eps,
+        t_total_ms: report.timing_ms.total,
+        noise_ratio: noise * case.shape.size() / case.shape.thinnest_half_axis(),
+        refused: false,
+        uncertain_warning: report.warnings.iter().any(|w| w.starts_with("uncertain")),
+        misfit_warning: report
+            .warnings
+            .iter()
+            .any(|w| w.starts_with("off a precise")),
+        warned: !report.warnings.is_empty(),
+        uncertainty: report
+            .quality
+            .standard_errors
+            .as_ref()
+            .map_or(f64::NAN, |e| e.share_of_tolerance()),
+        attainable: attainable::suite_case(&case, case_seed).unwrap_or(f64::NAN),
+        visible_coverage: report.quality.visible_coverage.unwrap_or(f64::NAN),
+        viewpoint_found: report.viewpoint.source == ViewpointSource::FrameOrigin,
+        from_truth: from_truth.then(|| recovered_from_truth(&case, TruthPoints::All, true, base)),
+    };
+    Ok((judged, picture))
+}
+
+/// Successes in each of the first `cases` categories (all 18 from 18 cases a set).
+fn categories(out: &[Case], cases: usize) -> Vec<Category> {
+    (0..18.min(cases))
+        .map(|c| {
+            let (partial, noise, outliers) = category(c);
+            let members: Vec<&Case> = out
+                .iter()
+                .filter(|k| k.partial == partial && k.noise == noise && k.outliers == outliers)
+                .collect();
+            let successes = members.iter().filter(|k| k.success).count();
+            Category {
+                partial,
+                noise,
+                outliers,
+                cases: members.len(),
+                successes,
+                rate: successes as f64 / members.len().max(1) as f64,
+                attainable_rate: mean_attainable(members.iter().copied()),
+            }
+        })
+        .collect()
 }
 
 /// (warned, all) of the cases whose success is `success`.
