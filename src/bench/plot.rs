@@ -102,15 +102,7 @@ pub fn panels_png(panels: &[Panel], size: u32) -> Result<Vec<u8>, String> {
         }
         root.present().map_err(|e| e.to_string())?;
     }
-    let mut out = Vec::new();
-    {
-        let mut encoder = png::Encoder::new(&mut out, w, h);
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
-        writer.write_image_data(&rgb).map_err(|e| e.to_string())?;
-    }
-    Ok(out)
+    crate::io::encode_rgb_png(w, h, &rgb)
 }
 
 fn draw_panel<DB: DrawingBackend>(

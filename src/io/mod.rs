@@ -24,6 +24,20 @@ pub mod xyz;
 pub use ply::{write_ply_mesh, write_ply_points, write_ply_residuals};
 pub use xyz::{parse_xyz, write_xyz};
 
+/// An 8-bit RGB image (rows of `width` pixels, three bytes each) as PNG bytes: the
+/// pictures' and plots' format.
+pub fn encode_rgb_png(width: u32, height: u32, rgb: &[u8]) -> Result<Vec<u8>, String> {
+    let mut out = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut out, width, height);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
+        writer.write_image_data(rgb).map_err(|e| e.to_string())?;
+    }
+    Ok(out)
+}
+
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use std::io::Read;

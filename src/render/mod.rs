@@ -59,13 +59,5 @@ pub fn render_png(scene: &Scene, view_size: u32) -> Result<Vec<u8>, String> {
         .chunks_exact(4)
         .flat_map(|p| [p[0], p[1], p[2]])
         .collect();
-    let mut out = Vec::new();
-    {
-        let mut encoder = png::Encoder::new(&mut out, width, height);
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
-        writer.write_image_data(&rgb).map_err(|e| e.to_string())?;
-    }
-    Ok(out)
+    crate::io::encode_rgb_png(width, height, &rgb)
 }
