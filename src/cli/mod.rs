@@ -672,6 +672,11 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         time_budget_ms: args.time_budget_ms,
         ..Default::default()
     };
+    // (the benches of objects with and without a hole choose the model unless told)
+    let auto = crate::fit::FitOptions {
+        model: args.model.unwrap_or(crate::fit::Model::Auto),
+        ..options.clone()
+    };
     let render = args
         .render
         .as_ref()
@@ -740,30 +745,18 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
             write(&|d| write_report(d, &r), r.markdown())
         }
         BenchCommand::Models { cases, seed } => {
-            let options = crate::fit::FitOptions {
-                model: args.model.unwrap_or(crate::fit::Model::Auto),
-                ..options.clone()
-            };
-            let r = crate::bench::models::run(*cases, *seed, backend, &options)
-                .map_err(Failure::input)?;
+            let r =
+                crate::bench::models::run(*cases, *seed, backend, &auto).map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }
         BenchCommand::Scenes { frames, seed } => {
-            let options = crate::fit::FitOptions {
-                model: args.model.unwrap_or(crate::fit::Model::Auto),
-                ..options.clone()
-            };
-            let r = crate::bench::scenes::run(*frames, *seed, backend, &options)
+            let r = crate::bench::scenes::run(*frames, *seed, backend, &auto)
                 .map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }
         BenchCommand::Boxes { frames, seed } => {
-            let options = crate::fit::FitOptions {
-                model: args.model.unwrap_or(crate::fit::Model::Auto),
-                ..options.clone()
-            };
-            let r = crate::bench::boxes::run(*frames, *seed, backend, &options)
-                .map_err(Failure::input)?;
+            let r =
+                crate::bench::boxes::run(*frames, *seed, backend, &auto).map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }
         BenchCommand::Scaling {
