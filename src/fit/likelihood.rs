@@ -254,22 +254,7 @@ impl<'a> Problem<'a> {
             cutoff,
             section_cell_sigmas,
         };
-        let t = candidate.pose.translation;
-        let x = Vector::from_column_slice(&[
-            s.a1,
-            s.a2,
-            s.a3,
-            s.a4,
-            s.eps1,
-            s.eps2,
-            t.x,
-            t.y,
-            t.z,
-            0.0,
-            0.0,
-            0.0,
-            sigma.ln(),
-        ]);
+        let x = super::objective::parameters(candidate, sigma);
         Some((problem, x))
     }
 }
