@@ -13,6 +13,7 @@
 //! * [`depth`]: 16-bit depth frames (PNG or raw u16) back-projected through pinhole
 //!   intrinsics.
 //! * [`mesh`]: a triangle mesh of a fitted supertoroid.
+//! * [`encode_rgb_png`]: the pictures' and plots' PNG encoding.
 
 pub mod depth;
 pub mod mesh;
@@ -23,6 +24,11 @@ pub mod xyz;
 
 pub use ply::{write_ply_mesh, write_ply_points, write_ply_residuals};
 pub use xyz::{parse_xyz, write_xyz};
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use std::io::Read;
+use std::path::Path;
 
 /// An 8-bit RGB image (rows of `width` pixels, three bytes each) as PNG bytes: the
 /// pictures' and plots' format.
@@ -37,11 +43,6 @@ pub fn encode_rgb_png(width: u32, height: u32, rgb: &[u8]) -> Result<Vec<u8>, St
     }
     Ok(out)
 }
-
-use glam::DVec3;
-use serde::{Deserialize, Serialize};
-use std::io::Read;
-use std::path::Path;
 
 /// The cloud formats the readers know.
 #[derive(
