@@ -53,16 +53,6 @@ struct Buffers {
 
 impl Buffers {
     fn new(device: &wgpu::Device, geometry: &Geometry) -> Self {
-        let pad = |v: &[Vertex]| {
-            if v.is_empty() {
-                vec![Vertex {
-                    position: [0.0; 3],
-                    color: [0.0; 3],
-                }]
-            } else {
-                v.to_vec()
-            }
-        };
         let indices: &[u32] = if geometry.indices.is_empty() {
             &[0, 0, 0]
         } else {
@@ -72,7 +62,7 @@ impl Buffers {
             mesh: buffer(
                 device,
                 "mesh",
-                bytemuck::cast_slice(&pad(&geometry.mesh)),
+                bytemuck::cast_slice(or_unused(&geometry.mesh)),
                 wgpu::BufferUsages::VERTEX,
             ),
             indices: buffer(
@@ -85,11 +75,26 @@ impl Buffers {
             points: buffer(
                 device,
                 "points",
-                bytemuck::cast_slice(&pad(&geometry.points)),
+                bytemuck::cast_slice(or_unused(&geometry.points)),
                 wgpu::BufferUsages::VERTEX,
             ),
             point_count: geometry.points.len() as u32,
         }
+    }
+}
+
+/// One vertex that is never drawn, for an empty list (a buffer may not be empty).
+const UNUSED: [Vertex; 1] = [Vertex {
+    position: [0.0; 3],
+    color: [0.0; 3],
+}];
+
+/// `vertices`, or [`UNUSED`] where there are none (the vertices themselves: no copy).
+fn or_unused(vertices: &[Vertex]) -> &[Vertex] {
+    if vertices.is_empty() {
+        &UNUSED
+    } else {
+        vertices
     }
 }
 
