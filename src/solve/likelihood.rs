@@ -83,12 +83,13 @@ pub struct Minimum {
 }
 
 /// Minimises `problem` from `x` by Levenberg-Marquardt (damping 1e-3 at the start,
-/// scaled by [`accepted_damping_factor`] after an accepted step, x4 after a rejected one,
-/// stopping above 1e6). A step whose value in its own new reference is above the last
-/// accepted value counts as rejected, and the problem goes back to the reference it had
-/// before ([`LikelihoodProblem::restore`]); [`TAKEN_BACK_IN_A_ROW`] such steps end the
-/// loop. It stops too where the undamped step predicts less than
-/// [`Stopping::predicted`].
+/// scaled by [`accepted_damping_factor`] after an accepted step; after an uphill trial
+/// set so that the next step is as long as [`backtracking_fraction`] says, x4 after one
+/// outside the feasible set; stopping above 1e6). A step whose value in its own new
+/// reference is above the last accepted value counts as rejected, and the problem goes
+/// back to the reference it had before ([`LikelihoodProblem::restore`]);
+/// [`TAKEN_BACK_IN_A_ROW`] such steps end the loop. It stops too where the undamped step
+/// predicts less than [`Stopping::predicted`].
 pub fn minimise(
     problem: &mut impl LikelihoodProblem,
     mut x: Vector,
@@ -190,6 +191,13 @@ pub fn minimise(
                     break;
                 }
             }
+            (Some(trial), Some((value, ..))) => {
+                let fraction = backtracking_fraction(g.dot(&(trial - x)), value - f);
+                lambda = damping_for_length(|l| solve_step(&g, &h, l), lambda, fraction);
+                if lambda > 1e6 {
+                    break;
+                }
+            }
             _ => {
                 lambda *= 4.0;
                 if lambda > 1e6 {
@@ -228,6 +236,51 @@ fn accepted_damping_factor(decrease: f64, predicted: f64) -> f64 {
     }
     let rho = decrease / predicted;
     (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0)
+}
+
+/// How much of an uphill trial's step the next one takes: the minimum of the parabola
+/// through the value, its `slope` along the step (g·s) and the trial's `rise` above it,
+/// within [`BACKTRACKING_FRACTIONS`]. The BHHH Hessian underrates some curvatures (on a
+/// scene object's polish the value's minimum along the undamped step lay at a quarter of
+/// it), and raising the damping fourfold a trial took up to seven uphill trials,
+/// each a whole evaluation, to shorten a step enough: a refinement screened after five
+/// iterations (the polish's other reading of a top view) could spend all five there and
+/// be dropped unmoved (`docs/fit.md`).
+fn backtracking_fraction(slope: f64, rise: f64) -> f64 {
+    let (shortest, longest) = BACKTRACKING_FRACTIONS;
+    let curvature = rise - slope;
+    if slope < 0.0 && curvature > 0.0 {
+        (-slope / (2.0 * curvature)).clamp(shortest, longest)
+    } else {
+        longest
+    }
+}
+
+/// The shortest and longest share of an uphill trial's step that the next trial takes:
+/// a backtracking line search's safeguards (Nocedal and Wright, *Numerical
+/// Optimization*, §3.5), so that a parabola fitted to a rough value neither stalls the
+/// loop nor retries nearly the same step.
+pub const BACKTRACKING_FRACTIONS: (f64, f64) = (0.1, 0.5);
+
+/// The damping at which the step `step_at(damping)` is `fraction` as long as the step at
+/// `lambda`, by bisection on its logarithm up to 1e6 (where the loop stops). A damped
+/// step's length falls monotonically with the damping, and a 13x13 solve costs
+/// microseconds against an evaluation's milliseconds.
+fn damping_for_length(step_at: impl Fn(f64) -> Option<Vector>, lambda: f64, fraction: f64) -> f64 {
+    let lambda = lambda.max(1e-9);
+    let Some(step) = step_at(lambda) else {
+        return lambda * 4.0;
+    };
+    let target = fraction * step.norm();
+    let (mut low, mut high) = (lambda.ln(), 1e6f64.ln() + 1.0);
+    for _ in 0..30 {
+        let middle = 0.5 * (low + high);
+        match step_at(middle.exp()) {
+            Some(s) if s.norm() > target => low = middle,
+            _ => high = middle,
+        }
+    }
+    high.exp()
 }
 
 /// (H + lambda diag H) step = -g over the free parameters (the others do not move).
@@ -429,6 +482,29 @@ mod tests {
             .filter(|w| !w[0] && !w[1])
             .count();
         assert_eq!(later_rejections, 0, "{log:?}");
+    }
+
+    /// Where the undamped step overshoots (the Hessian a quarter of the curvature: it
+    /// lands at -3x), the trial after it is the parabola's minimum, the bowl's centre:
+    /// one uphill trial, not the five a fourfold damping took to halve the step.
+    #[test]
+    fn an_uphill_trial_is_followed_by_the_step_to_the_minimum_of_its_parabola() {
+        let mut problem = Underestimated {
+            log: Default::default(),
+        };
+        let minimum = minimise(
+            &mut problem,
+            Vector::from_element(1.0),
+            &nothing_held(),
+            &stopping(),
+        );
+        assert!(minimum.x.norm() < 1e-6, "{minimum:?}");
+        // (the uphill trial, the step to the centre, two steps too small to go on)
+        assert_eq!(minimum.iterations, 4, "{minimum:?}");
+        assert!((backtracking_fraction(-4.0, 4.0) - 0.25).abs() < 1e-12);
+        // (a trial that rose far: the step shrinks tenfold at most; no slope: halved)
+        assert_eq!(backtracking_fraction(-1.0, 1e3), 0.1);
+        assert_eq!(backtracking_fraction(0.0, 1.0), 0.5);
     }
 
     fn stopping() -> Stopping {
