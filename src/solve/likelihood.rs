@@ -193,7 +193,9 @@ pub fn minimise(
             }
             (Some(trial), Some((value, ..))) => {
                 let fraction = backtracking_fraction(g.dot(&(trial - x)), value - f);
-                lambda = damping_for_length(|l| solve_step(&g, &h, l), lambda, fraction);
+                // (the step solved at this damping, before any clamping into the bounds)
+                let length = fraction * step.norm();
+                lambda = damping_for_length(|l| solve_step(&g, &h, l), lambda, length);
                 if lambda > 1e6 {
                     break;
                 }
@@ -262,21 +264,16 @@ fn backtracking_fraction(slope: f64, rise: f64) -> f64 {
 /// loop nor retries nearly the same step.
 pub const BACKTRACKING_FRACTIONS: (f64, f64) = (0.1, 0.5);
 
-/// The damping at which the step `step_at(damping)` is `fraction` as long as the step at
-/// `lambda`, by bisection on its logarithm up to 1e6 (where the loop stops). A damped
-/// step's length falls monotonically with the damping, and a 13x13 solve costs
-/// microseconds against an evaluation's milliseconds.
-fn damping_for_length(step_at: impl Fn(f64) -> Option<Vector>, lambda: f64, fraction: f64) -> f64 {
-    let lambda = lambda.max(1e-9);
-    let Some(step) = step_at(lambda) else {
-        return lambda * 4.0;
-    };
-    let target = fraction * step.norm();
-    let (mut low, mut high) = (lambda.ln(), 1e6f64.ln() + 1.0);
+/// The damping above `lambda` at which the step `step_at(damping)` is `length` long, by
+/// bisection on its logarithm up to 1e6 (where the loop stops). A damped step's length
+/// falls monotonically with the damping, and a 13x13 solve costs microseconds against
+/// an evaluation's milliseconds.
+fn damping_for_length(step_at: impl Fn(f64) -> Option<Vector>, lambda: f64, length: f64) -> f64 {
+    let (mut low, mut high) = (lambda.max(1e-9).ln(), 1e6f64.ln() + 1.0);
     for _ in 0..30 {
         let middle = 0.5 * (low + high);
         match step_at(middle.exp()) {
-            Some(s) if s.norm() > target => low = middle,
+            Some(s) if s.norm() > length => low = middle,
             _ => high = middle,
         }
     }
