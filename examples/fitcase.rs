@@ -1,6 +1,7 @@
 //! Development: fit suite cases as the bench presents them (camera frame, no options; or
 //! with GIVEN set, the camera's position given) and print truth, fit, errors and timing;
-//! with PAPER set, by `Method::Paper`; with TRUTH set, the likelihood of the fit against the truth refined.
+//! with PAPER set, by `Method::Paper`; with TRUTH set, the likelihood of the fit against the truth refined;
+//! with AXIS set, the true hole axis in the cloud's frame (to set beside the search's candidates).
 use supertoroid::bench::synthetic::{Presentation, category, presented};
 use supertoroid::eval::{CpuEvaluator, Normalization};
 use supertoroid::fit::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, fit, likelihood, objective};
@@ -49,6 +50,12 @@ fn main() {
             r.timing_ms,
             r.warnings.len()
         );
+        if std::env::var("AXIS").is_ok() {
+            println!(
+                "  truth axis in the cloud's frame {:.2?}",
+                back.rotation.inverse() * (case.pose.rotation * glam::DVec3::Z)
+            );
+        }
         if std::env::var("QUALITY").is_ok() {
             println!(
                 "  median distance / size {:.2e}, noise sigma / size {:.2e}, scatter {:?}",
