@@ -269,6 +269,8 @@ pub const BACKTRACKING_FRACTIONS: (f64, f64) = (0.1, 0.5);
 /// falls monotonically with the damping, and a 13x13 solve costs microseconds against
 /// an evaluation's milliseconds.
 fn damping_for_length(step_at: impl Fn(f64) -> Option<Vector>, lambda: f64, length: f64) -> f64 {
+    // (the upper end lies past 1e6: a length no damping up to there reaches comes back
+    // over 1e6, and the caller stops)
     let (mut low, mut high) = (lambda.max(1e-9).ln(), 1e6f64.ln() + 1.0);
     for _ in 0..30 {
         let middle = 0.5 * (low + high);
