@@ -921,6 +921,29 @@ fn a_ring_seen_from_the_side_is_fitted_from_behind_its_skin() {
     );
 }
 
+/// A ring seen near edge-on, whose view a closed slab lying across the hole also covers,
+/// converges beside that slab however far behind it round 2 leaves the ring
+/// (`fit::search::rounds::ring_beside_closed`): the views 120085, 120089 and 140013
+/// (1-2% noise, 5-10% outliers), fitted as closed slabs with the hole axis 60-90 degrees
+/// off when only round 2's close finalists converged, are recovered with their hole.
+#[test]
+fn a_ring_behind_a_closed_slab_converges_beside_it() {
+    let mut evaluator = CpuEvaluator::new();
+    for (first_seed, seed) in [(120_000, 120_085), (120_000, 120_089), (140_000, 140_013)] {
+        let (case, report) = assert_recovered(&mut evaluator, first_seed, seed);
+        let camera = (case.viewpoint.unwrap() - case.pose.translation).normalize();
+        assert!(
+            camera.dot(case.pose.axis()).abs() < 0.5,
+            "case {seed} is seen within 30 degrees of edge-on"
+        );
+        assert!(
+            report.fitted.0.a4 > 1.0,
+            "case {seed}: {:?}",
+            report.fitted.0
+        );
+    }
+}
+
 fn viewpoint_warnings(report: &FitReport) -> Vec<&String> {
     report
         .warnings

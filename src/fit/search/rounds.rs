@@ -379,6 +379,23 @@ fn refine_noisy(
 /// close). A closed one seen across its axis has its hollow reading converged beside it
 /// ([`hollow_finalist`]). The polish then takes it on more of the cloud's points. With
 /// the number of finalists converged.
+/// Round 2's likeliest ring, where its likeliest candidate and every finalist are closed
+/// (a4 at most 1). A ring and a closed body lying across its hole are told apart only once
+/// converged: round 2's few likelihood steps on a sample leave a thin ring seen near
+/// edge-on behind the slab that covers it, by more than `CLOSE_MARGIN`, so the ring
+/// converges beside them whatever its margin and the likeliest after convergence stands.
+fn ring_beside_closed(best: &Scored, finalists: &[Scored], round2: &[Scored]) -> Option<Scored> {
+    let closed = |s: &Scored| s.candidate.shape.a4 <= 1.0;
+    if !closed(best) || !finalists.iter().all(closed) {
+        return None;
+    }
+    round2
+        .iter()
+        .filter(|c| c.modelled && !closed(c))
+        .min_by(|a, b| a.rank(b))
+        .copied()
+}
+
 pub(super) fn finalists(
     group: &[(usize, Prepared)],
     round2: &[Vec<Scored>],
@@ -410,7 +427,11 @@ pub(super) fn finalists(
                 .filter(|c| c.modelled && c.score <= best.score + CLOSE_MARGIN)
                 .copied()
                 .collect();
-            let mut converged: Vec<Scored> = most_likely_distinct(close, 2)
+            let mut finalists = most_likely_distinct(close, 2);
+            if let Some(ring) = ring_beside_closed(&best, &finalists, &round2[cloud]) {
+                finalists.push(ring);
+            }
+            let mut converged: Vec<Scored> = finalists
                 .into_par_iter()
                 .map(|c| converge(p, &sample, c, REFINE_ITERATIONS))
                 .collect();
