@@ -14,10 +14,11 @@
 //!    ([`noisy`]): a few likelihood iterations on [`ROUND2_POINTS`] points on a noisy
 //!    cloud, least squares under a Cauchy loss on a precise one.
 //! 3. The likeliest, and any within [`CLOSE_MARGIN`] of it, converge on the stage-2
-//!    sample, and where all those are closed, round 2's likeliest ring beside them
-//!    (a ring and a slab across its hole are told apart only once converged); a closed one (no through hole) seen across its axis converges beside its
-//!    hollow reading ([`starts::hollowed`]) by the likelihood, whatever the cloud's noise;
-//!    the most likely stands, and goes on to the polish ([`polish`]).
+//!    sample, and where all those are closed, round 2's likeliest ring beside them (a
+//!    ring and a slab across its hole are told apart only once converged); a closed one
+//!    (no through hole) seen across its axis converges beside its hollow reading
+//!    ([`starts::hollowed`]) by the likelihood, whatever the cloud's noise; the most
+//!    likely stands, and goes on to the polish ([`polish`]).
 //!
 //! A cloud read both as a view from its frame's origin and as a view from nowhere is
 //! searched in both readings in the same batch; a reading plainly less likely after round 2

@@ -373,17 +373,12 @@ fn refine_noisy(
     Ok(refined)
 }
 
-/// Each cloud's fit: its likeliest round-2 candidate, converged on the stage-2 sample
-/// where the likelihood refined it (a runner-up within [`CLOSE_MARGIN`] converges too,
-/// and the likelier of the two stands: the two readings of a top view are often that
-/// close). A closed one seen across its axis has its hollow reading converged beside it
-/// ([`hollow_finalist`]). The polish then takes it on more of the cloud's points. With
-/// the number of finalists converged.
 /// Round 2's likeliest ring, where its likeliest candidate and every finalist are closed
-/// (a4 at most 1). A ring and a closed body lying across its hole are told apart only once
-/// converged: round 2's few likelihood steps on a sample leave a thin ring seen near
-/// edge-on behind the slab that covers it, by more than `CLOSE_MARGIN`, so the ring
-/// converges beside them whatever its margin and the likeliest after convergence stands.
+/// (a4 at most 1): it converges beside them ([`finalists`]). A ring and a closed body
+/// lying across its hole are told apart only once converged: round 2's few likelihood
+/// steps on a sample leave a thin ring seen near edge-on behind the slab that covers it
+/// by more than `CLOSE_MARGIN`, so the ring converges whatever its margin, and the
+/// likeliest after convergence stands.
 fn ring_beside_closed(best: &Scored, finalists: &[Scored], round2: &[Scored]) -> Option<Scored> {
     let closed = |s: &Scored| s.candidate.shape.a4 <= 1.0;
     if !closed(best) || !finalists.iter().all(closed) {
@@ -396,6 +391,13 @@ fn ring_beside_closed(best: &Scored, finalists: &[Scored], round2: &[Scored]) ->
         .copied()
 }
 
+/// Each cloud's fit: its likeliest round-2 candidate, converged on the stage-2 sample
+/// where the likelihood refined it (a runner-up within [`CLOSE_MARGIN`] converges too,
+/// and the likelier of the two stands: the two readings of a top view are often that
+/// close). A closed one seen across its axis has its hollow reading converged beside it
+/// ([`hollow_finalist`]), and where every finalist is closed round 2's likeliest ring
+/// ([`ring_beside_closed`]). The polish then takes it on more of the cloud's points. With
+/// the number of finalists converged.
 pub(super) fn finalists(
     group: &[(usize, Prepared)],
     round2: &[Vec<Scored>],
