@@ -373,20 +373,20 @@ fn refine_noisy(
     Ok(refined)
 }
 
-/// Round 2's likeliest ring, where its likeliest candidate and every finalist are closed
-/// (a4 at most 1): it converges beside them ([`finalists`]). A ring and a closed body
-/// lying across its hole are told apart only once converged: round 2's few likelihood
-/// steps on a sample leave a thin ring seen near edge-on behind the slab that covers it
-/// by more than `CLOSE_MARGIN`, so the ring converges whatever its margin, and the
-/// likeliest after convergence stands.
-fn ring_beside_closed(best: &Scored, finalists: &[Scored], round2: &[Scored]) -> Option<Scored> {
-    let closed = |s: &Scored| s.candidate.shape.a4 <= 1.0;
-    if !closed(best) || !finalists.iter().all(closed) {
+/// Round 2's likeliest ring, where every finalist (round 2's likeliest among them) is
+/// closed: it converges beside them ([`finalists`]). A ring and a closed body lying
+/// across its hole are told apart only once converged: round 2's few likelihood steps on
+/// a sample leave a thin ring seen near edge-on behind the slab that covers it by more
+/// than `CLOSE_MARGIN`, so the ring converges whatever its margin, and the likeliest
+/// after convergence stands.
+fn ring_beside_closed(finalists: &[Scored], round2: &[Scored]) -> Option<Scored> {
+    let holed = |s: &Scored| s.candidate.shape.has_hole();
+    if finalists.iter().any(holed) {
         return None;
     }
     round2
         .iter()
-        .filter(|c| c.modelled && !closed(c))
+        .filter(|c| c.modelled && holed(c))
         .min_by(|a, b| a.rank(b))
         .copied()
 }
@@ -430,7 +430,7 @@ pub(super) fn finalists(
                 .copied()
                 .collect();
             let mut finalists = most_likely_distinct(close, 2);
-            if let Some(ring) = ring_beside_closed(&best, &finalists, &round2[cloud]) {
+            if let Some(ring) = ring_beside_closed(&finalists, &round2[cloud]) {
                 finalists.push(ring);
             }
             let mut converged: Vec<Scored> = finalists
