@@ -7,6 +7,7 @@ use super::SeededRng;
 use crate::model::{Pose, Shape};
 use glam::{DMat3, DQuat, DVec3};
 use rand::Rng;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Pinhole intrinsics in pixels (OpenCV convention: pixel (u, v) has its centre at
@@ -180,39 +181,48 @@ pub fn render_view(
     let origin = object.to_canonical(camera.pose.translation);
     let to_canonical = object.rotation.inverse() * camera.pose.rotation;
 
+    // one pixel's ray: its optical depth and surface point (canonical frame), or None
+    let trace = |u: u32, v: u32| -> Option<(u16, DVec3)> {
+        let ray_cam = k.ray(u as f64, v as f64);
+        let dir = (to_canonical * ray_cam).normalize();
+        let (t_in, t_out) = ray_box(origin, dir, half)?;
+        let mut t = t_in.max(0.0);
+        let mut hit = None;
+        for _ in 0..20_000 {
+            if t > t_out {
+                break;
+            }
+            let gap = (shape.section_norm(origin + dir * t) - 1.0) / lipschitz;
+            if gap <= tolerance {
+                hit = Some(t);
+                break;
+            }
+            t += gap;
+        }
+        let t = hit?;
+        // optical depth: distance along the ray times the ray's z component per unit length
+        let z_cam = t / ray_cam.length();
+        let raw = (z_cam / depth_scale).round();
+        // like a real sensor: beyond the u16 range there is no return
+        (1.0..=u16::MAX as f64)
+            .contains(&raw)
+            .then(|| (raw as u16, origin + dir * t))
+    };
+    // rows traced in parallel, gathered in row order: the same view whatever the threads
+    let rows: Vec<Vec<(u32, u16, DVec3)>> = (0..k.height)
+        .into_par_iter()
+        .map(|v| {
+            (0..k.width)
+                .filter_map(|u| trace(u, v).map(|(raw, canonical)| (u, raw, canonical)))
+                .collect()
+        })
+        .collect();
     let mut depth = vec![0u16; (k.width * k.height) as usize];
     let mut points = Vec::new();
     let mut pixels = Vec::new();
-    for v in 0..k.height {
-        for u in 0..k.width {
-            let ray_cam = k.ray(u as f64, v as f64);
-            let dir = (to_canonical * ray_cam).normalize();
-            let Some((t_in, t_out)) = ray_box(origin, dir, half) else {
-                continue;
-            };
-            let mut t = t_in.max(0.0);
-            let mut hit = None;
-            for _ in 0..20_000 {
-                if t > t_out {
-                    break;
-                }
-                let gap = (shape.section_norm(origin + dir * t) - 1.0) / lipschitz;
-                if gap <= tolerance {
-                    hit = Some(t);
-                    break;
-                }
-                t += gap;
-            }
-            let Some(t) = hit else { continue };
-            let canonical = origin + dir * t;
-            // optical depth: distance along the ray times the ray's z component per unit length
-            let z_cam = t / ray_cam.length();
-            let raw = (z_cam / depth_scale).round();
-            // like a real sensor: beyond the u16 range there is no return
-            if !(1.0..=u16::MAX as f64).contains(&raw) {
-                continue;
-            }
-            depth[(v * k.width + u) as usize] = raw as u16;
+    for (v, row) in (0..k.height).zip(rows) {
+        for (u, raw, canonical) in row {
+            depth[(v * k.width + u) as usize] = raw;
             points.push(object.to_world(canonical));
             pixels.push([u, v]);
         }
