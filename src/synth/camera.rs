@@ -181,7 +181,7 @@ pub fn render_view(
     let origin = object.to_canonical(camera.pose.translation);
     let to_canonical = object.rotation.inverse() * camera.pose.rotation;
 
-    // one pixel's ray: its optical depth and surface point (canonical frame), or None
+    // one pixel's ray: its optical depth and surface point (world frame), or None
     let trace = |u: u32, v: u32| -> Option<(u16, DVec3)> {
         let ray_cam = k.ray(u as f64, v as f64);
         let dir = (to_canonical * ray_cam).normalize();
@@ -206,26 +206,23 @@ pub fn render_view(
         // like a real sensor: beyond the u16 range there is no return
         (1.0..=u16::MAX as f64)
             .contains(&raw)
-            .then(|| (raw as u16, origin + dir * t))
+            .then(|| (raw as u16, object.to_world(origin + dir * t)))
     };
-    // rows traced in parallel, gathered in row order: the same view whatever the threads
-    let rows: Vec<Vec<(u32, u16, DVec3)>> = (0..k.height)
+    // rows traced in parallel; `collect` keeps row-major order, so the view is the same
+    // whatever the threads
+    let hits: Vec<([u32; 2], u16, DVec3)> = (0..k.height)
         .into_par_iter()
-        .map(|v| {
-            (0..k.width)
-                .filter_map(|u| trace(u, v).map(|(raw, canonical)| (u, raw, canonical)))
-                .collect()
+        .flat_map_iter(|v| {
+            (0..k.width).filter_map(move |u| trace(u, v).map(|(raw, p)| ([u, v], raw, p)))
         })
         .collect();
     let mut depth = vec![0u16; (k.width * k.height) as usize];
-    let mut points = Vec::new();
-    let mut pixels = Vec::new();
-    for (v, row) in (0..k.height).zip(rows) {
-        for (u, raw, canonical) in row {
-            depth[(v * k.width + u) as usize] = raw;
-            points.push(object.to_world(canonical));
-            pixels.push([u, v]);
-        }
+    let mut points = Vec::with_capacity(hits.len());
+    let mut pixels = Vec::with_capacity(hits.len());
+    for ([u, v], raw, p) in hits {
+        depth[(v * k.width + u) as usize] = raw;
+        points.push(p);
+        pixels.push([u, v]);
     }
     Ok(RenderedView {
         points,
