@@ -669,21 +669,15 @@ fn report(
         .map(|s| coverage::visible_coverage(candidate, &p.stage2_pts, s));
     quality.standard_errors =
         uncertainty::standard_errors(&shape, &pose, p.points, &p.known.map(|k| k.is_some()));
-    // a hole seen from the side, where the likelihood fitted it: a4 as loose as the
-    // likelihood leaves it
-    if let (Some(errors), Some(viewpoint), Some(sigma)) = (
-        quality.standard_errors.as_mut(),
-        p.viewpoint,
-        modelled_sigma,
-    ) && candidate.shape.a4 > 1.0
-        && p.known[3].is_none()
-        && search::seen_across_its_axis(candidate, viewpoint)
-    {
+    // a fit the likelihood refined: each error as loose as the likelihood leaves it
+    if let (Some(errors), Some(sigma)) = (quality.standard_errors.as_mut(), modelled_sigma) {
         let sample = search::Sample::new(&p.stage2_pts, p.sight(), false);
         let data = sample.data();
-        if let Some(a4) = uncertainty::likelihood_a4_error(&data, candidate, sigma, p.points.len())
+        let held = p.known.map(|k| k.is_some());
+        if let Some(by_likelihood) =
+            uncertainty::likelihood_errors(&data, candidate, sigma, p.points.len(), &held)
         {
-            errors.a4 = errors.a4.max(a4);
+            *errors = errors.max(by_likelihood);
         }
     }
     let warnings = quality

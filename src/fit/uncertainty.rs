@@ -5,11 +5,13 @@
 //! weights (2.5 sigma), and the gauge of a shape that is symmetric about its axis (a
 //! turn about it moves no point) is left out by a pseudo-inverse.
 //!
-//! A hole seen from the side has a4's error from the likelihood's information too
-//! ([`likelihood_a4_error`]). A fit whose standard errors reach half the success rule's
-//! tolerances (sizes 10%, a4 10%, eps 0.15) gets the `uncertain shape` warning: the
-//! points leave the shape loose enough that a fit off by a tolerance is ordinary. Not in
-//! the paper.
+//! A fit the noise model refined has its errors from the likelihood's information too
+//! ([`likelihood_errors`]), the larger of each pair standing: the fit is that
+//! likelihood's maximum, and on a noisy cloud the meridian distances read a section
+//! blurred to a fraction of its thickness as pinned where the likelihood is flat. A fit
+//! whose standard errors reach half the success rule's tolerances (sizes 10%, a4 10%,
+//! eps 0.15) gets the `uncertain shape` warning: the points leave the shape loose enough
+//! that a fit off by a tolerance is ordinary. Not in the paper.
 
 use crate::eval::{Candidate, CpuEvaluator, Evaluator, Loss};
 use crate::model::{Pose, Shape};
@@ -42,14 +44,22 @@ pub struct StandardErrors {
     pub sizes: f64,
     /// a4's over a4; for a free fit that came out a superellipsoid (a4 on its bound at
     /// 0), a4's over 1, the least a4 with a hole: whether the points could hold one; 0
-    /// where a4 is held (a superellipsoid fit, a known a4); for a hole the likelihood
-    /// fitted, seen from the side, the larger of this and [`likelihood_a4_error`]
+    /// where a4 is held (a superellipsoid fit, a known a4)
     pub a4: f64,
     /// the larger of eps1 and eps2's
     pub eps: f64,
 }
 
 impl StandardErrors {
+    /// Each error the larger of the two.
+    pub fn max(self, other: Self) -> Self {
+        Self {
+            sizes: self.sizes.max(other.sizes),
+            a4: self.a4.max(other.a4),
+            eps: self.eps.max(other.eps),
+        }
+    }
+
     /// The largest standard error as a share of its tolerance.
     pub fn share_of_tolerance(&self) -> f64 {
         (self.sizes / SIZE_TOLERANCE)
@@ -148,28 +158,48 @@ pub fn warning(errors: &StandardErrors) -> Option<String> {
     })
 }
 
-/// a4's standard error over a4 by the noise model's own information at a holed fit: the
-/// BHHH outer product of the points' scores on `data` ([`crate::fit::objective`], sigma
-/// and pose free), times the cloud's `count`, pseudo-inverted as the least-squares
-/// covariance is. Seen from the side a tube shows its outside, and how its outer radius
-/// splits into hole and wall is weighed only by where the sensor would have seen into
-/// the hole, which the meridian distances do not see: their covariance reads a4 as pinned
-/// where the likelihood is flat.
-pub fn likelihood_a4_error(
+/// The shape's standard errors by the noise model's own information at a fit it refined:
+/// the BHHH outer product of the points' scores on `data` ([`crate::fit::objective`],
+/// sigma and pose free), times the cloud's `count`, pseudo-inverted as the least-squares
+/// covariance is. The `held` shape parameters are no parameters of the fit (their rows
+/// go), nor is a free a4 that came out on its bound at 0 (the least-squares error says
+/// whether the points could hold a hole).
+pub fn likelihood_errors(
     data: &crate::fit::objective::Data,
     candidate: &Candidate,
     sigma: f64,
     count: usize,
-) -> Option<f64> {
+    held: &[bool; 6],
+) -> Option<StandardErrors> {
     use crate::fit::objective::{Objective, parameters};
+    let shape = &candidate.shape;
+    let mut held = *held;
+    held[3] |= crate::fit::model_choice::is_superellipsoid(shape);
     let mut objective = Objective::new(data, candidate, sigma);
     let x = parameters(candidate, sigma);
     objective.hold(&x);
     let (_, _, outer) = objective.evaluate(&x, true);
-    let n = outer.nrows();
-    let information = DMatrix::from_fn(n, n, |i, j| outer[(i, j)] * count as f64);
-    let sd = inverse_diagonal(&information)?[3].sqrt();
-    (sd.is_finite() && candidate.shape.a4 > 0.0).then(|| sd / candidate.shape.a4)
+    let free: Vec<usize> = (0..outer.nrows()).filter(|&k| k >= 6 || !held[k]).collect();
+    let information = DMatrix::from_fn(free.len(), free.len(), |i, j| {
+        outer[(free[i], free[j])] * count as f64
+    });
+    let variances = inverse_diagonal(&information)?;
+    let relative = |parameter: usize, value: f64| {
+        free.iter()
+            .position(|&k| k == parameter)
+            .map_or(0.0, |i| variances[i].sqrt() / value)
+    };
+    let errors = StandardErrors {
+        sizes: relative(0, shape.a1)
+            .max(relative(1, shape.a2))
+            .max(relative(2, shape.a3)),
+        a4: relative(3, shape.a4),
+        eps: relative(4, 1.0).max(relative(5, 1.0)),
+    };
+    [errors.sizes, errors.a4, errors.eps]
+        .iter()
+        .all(|v| v.is_finite())
+        .then_some(errors)
 }
 
 /// The diagonal of the pseudo-inverse of `information` (the variances), taken after
@@ -255,6 +285,46 @@ mod tests {
             })
             .is_none()
         );
+    }
+
+    /// The likelihood's errors of a noisy ring at its truth: a held parameter has none,
+    /// holding one leaves the others no looser, and they fall as one over the root of
+    /// the count the information is scaled to.
+    #[test]
+    fn likelihood_errors_follow_the_count_and_leave_held_parameters_out() {
+        use crate::fit::objective::Data;
+        let shape = Shape::new(0.5, 0.4, 0.15, 2.0, 1.0, 1.0);
+        let candidate = Candidate {
+            shape,
+            pose: Pose::default(),
+        };
+        let sigma = 0.02;
+        let mut rng = crate::synth::rng(7);
+        let mut points = crate::synth::sample_surface(&shape, &Pose::default(), 800, &mut rng);
+        crate::synth::add_noise(&mut points, sigma, &mut rng);
+        let data = Data {
+            points: &points,
+            outlier_weight: 0.05,
+            outlier_density: 0.05 / 8.0,
+            sensor: None,
+        };
+        let errors = |count: usize, held: [bool; 6]| {
+            likelihood_errors(&data, &candidate, sigma, count, &held).unwrap()
+        };
+        let free = errors(800, [false; 6]);
+        assert!(
+            free.sizes > 0.0 && free.a4 > 0.0 && free.eps > 0.0,
+            "{free:?}"
+        );
+        let a4_held = errors(800, [false, false, false, true, false, false]);
+        assert_eq!(a4_held.a4, 0.0);
+        assert!(
+            a4_held.sizes <= free.sizes * (1.0 + 1e-9),
+            "{a4_held:?} {free:?}"
+        );
+        let four_times = errors(3200, [false; 6]);
+        let ratio = free.eps / four_times.eps;
+        assert!((ratio - 2.0).abs() < 1e-6, "{ratio}");
     }
 
     fn standard_errors_free(
