@@ -162,8 +162,8 @@ pub fn warning(errors: &StandardErrors) -> Option<String> {
 /// the BHHH outer product of the points' scores on `data` ([`crate::fit::objective`],
 /// sigma and pose free), times the cloud's `count`, pseudo-inverted as the least-squares
 /// covariance is. The `held` shape parameters are no parameters of the fit (their rows
-/// go), nor is a free a4 that came out on its bound at 0 (the least-squares error says
-/// whether the points could hold a hole).
+/// and columns go), nor is a free a4 that came out on its bound at 0 (the least-squares
+/// error says whether the points could hold a hole).
 pub fn likelihood_errors(
     data: &crate::fit::objective::Data,
     candidate: &Candidate,
