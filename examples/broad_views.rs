@@ -37,6 +37,8 @@ fn main() {
     // [wrong, right] fits, and of them those with a warning
     let mut judged = [0usize; 2];
     let mut warned = [0usize; 2];
+    // per family: [wrong, right] fits with a warning
+    let mut warned_by_family = [[0usize; 2]; 4];
     let mut times = Vec::new();
     for seed in first..first + cases {
         let family = (seed % 4) as usize;
@@ -60,6 +62,7 @@ fn main() {
         let success = errors.success();
         judged[usize::from(success)] += 1;
         warned[usize::from(success)] += usize::from(!report.warnings.is_empty());
+        warned_by_family[family][usize::from(success)] += usize::from(!report.warnings.is_empty());
         if success {
             right[family] += 1;
             continue;
@@ -93,7 +96,11 @@ fn main() {
         "{cases} views (seeds {first}..) through a D435-like sensor, no options, CPU evaluator:"
     );
     for (k, name) in FAMILIES.iter().enumerate() {
-        println!("  {name:13} {} of {}", right[k], counts[k]);
+        let [wrong_warned, right_warned] = warned_by_family[k];
+        println!(
+            "  {name:13} {} of {} (warned: {wrong_warned} of the wrong fits, {right_warned} of the right)",
+            right[k], counts[k]
+        );
     }
     println!(
         "  all           {} of {cases} ({refused} refused as no object); fit median {:.0} ms, p95 {:.0} ms",
