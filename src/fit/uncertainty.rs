@@ -51,6 +51,23 @@ pub struct StandardErrors {
 }
 
 impl StandardErrors {
+    /// The errors of `shape` from its parameters' standard deviations `sd` (None: held,
+    /// no error) and a4's relative error, None unless all are finite.
+    fn of(shape: &Shape, sd: &[Option<f64>; 6], a4: f64) -> Option<Self> {
+        let relative = |parameter: usize, value: f64| sd[parameter].map_or(0.0, |s| s / value);
+        let errors = Self {
+            sizes: relative(0, shape.a1)
+                .max(relative(1, shape.a2))
+                .max(relative(2, shape.a3)),
+            a4,
+            eps: relative(4, 1.0).max(relative(5, 1.0)),
+        };
+        [errors.sizes, errors.a4, errors.eps]
+            .iter()
+            .all(|v| v.is_finite())
+            .then_some(errors)
+    }
+
     /// Each error the larger of the two.
     pub fn max(self, other: Self) -> Self {
         Self {
@@ -114,8 +131,15 @@ pub fn standard_errors(
         .ok()?;
     // the sample's covariance, scaled to the whole cloud's count
     let whole = sample.len() as f64 / points.len() as f64;
-    let deviations =
-        |held: &[bool; 6]| standard_deviations(&ne[0].jtj, held, whole * sigma * sigma);
+    let jtj = &ne[0].jtj;
+    let deviations = |held: &[bool; 6]| {
+        standard_deviations(
+            crate::eval::NUM_PARAMS,
+            |i, j| jtj[i][j],
+            held,
+            whole * sigma * sigma,
+        )
+    };
     // a free a4 that came out on its bound at 0 (a superellipsoid) is held there for the
     // other parameters' errors, as a bound that holds it does; its own error, with it
     // free, says whether the points could hold a hole
@@ -123,24 +147,14 @@ pub fn standard_errors(
     let mut held_here = *held;
     held_here[3] |= at_bound;
     let sd = deviations(&held_here)?;
-    let relative = |parameter: usize, value: f64| sd[parameter].map_or(0.0, |s| s / value);
-    let errors = StandardErrors {
-        sizes: relative(0, shape.a1)
-            .max(relative(1, shape.a2))
-            .max(relative(2, shape.a3)),
-        a4: if at_bound {
-            deviations(held)?[3].map_or(0.0, |s| s / HOLE_A4)
-        } else if shape.a4 > 0.0 {
-            relative(3, shape.a4)
-        } else {
-            0.0
-        },
-        eps: sd[4].unwrap_or(0.0).max(sd[5].unwrap_or(0.0)),
+    let a4 = if at_bound {
+        deviations(held)?[3].map_or(0.0, |s| s / HOLE_A4)
+    } else if shape.a4 > 0.0 {
+        sd[3].map_or(0.0, |s| s / shape.a4)
+    } else {
+        0.0
     };
-    [errors.sizes, errors.a4, errors.eps]
-        .iter()
-        .all(|v| v.is_finite())
-        .then_some(errors)
+    StandardErrors::of(shape, &sd, a4)
 }
 
 /// The `uncertain shape` warning, where the standard errors reach [`WARNING_SHARE`] of
@@ -179,27 +193,13 @@ pub fn likelihood_errors(
     let x = parameters(candidate, sigma);
     objective.hold(&x);
     let (_, _, outer) = objective.evaluate(&x, true);
-    let free: Vec<usize> = (0..outer.nrows()).filter(|&k| k >= 6 || !held[k]).collect();
-    let information = DMatrix::from_fn(free.len(), free.len(), |i, j| {
-        outer[(free[i], free[j])] * count as f64
-    });
-    let variances = inverse_diagonal(&information)?;
-    let relative = |parameter: usize, value: f64| {
-        free.iter()
-            .position(|&k| k == parameter)
-            .map_or(0.0, |i| variances[i].sqrt() / value)
-    };
-    let errors = StandardErrors {
-        sizes: relative(0, shape.a1)
-            .max(relative(1, shape.a2))
-            .max(relative(2, shape.a3)),
-        a4: relative(3, shape.a4),
-        eps: relative(4, 1.0).max(relative(5, 1.0)),
-    };
-    [errors.sizes, errors.a4, errors.eps]
-        .iter()
-        .all(|v| v.is_finite())
-        .then_some(errors)
+    let sd = standard_deviations(
+        outer.nrows(),
+        |i, j| outer[(i, j)] * count as f64,
+        &held,
+        1.0,
+    )?;
+    StandardErrors::of(shape, &sd, sd[3].map_or(0.0, |s| s / shape.a4))
 }
 
 /// The diagonal of the pseudo-inverse of `information` (the variances), taken after
@@ -221,20 +221,21 @@ fn inverse_diagonal(information: &DMatrix<f64>) -> Option<Vec<f64>> {
     )
 }
 
-/// The standard deviation of each shape parameter (None for a held one) from the normal
-/// equations' `jtj` of the twelve parameters, times `variance`. A held shape parameter
-/// (the caller's known one, a superellipsoid's a4 at 0, which the solver keeps a rounding
-/// inside its bound) is no parameter of the fit: its column goes.
+/// The standard deviation of each shape parameter (None for a held one) from an
+/// information matrix over `parameters` parameters (`entry`: the normal equations' JᵀJ
+/// of the twelve, or the likelihood's thirteen with ln sigma), times `variance`. The
+/// shape's six come first and the pose's (and sigma) after. A held shape parameter (the
+/// caller's known one, a superellipsoid's a4 at 0, which the solver keeps a rounding
+/// inside its bound) is no parameter of the fit: its row and column go.
 fn standard_deviations(
-    jtj: &[[f64; crate::eval::NUM_PARAMS]; crate::eval::NUM_PARAMS],
+    parameters: usize,
+    entry: impl Fn(usize, usize) -> f64,
     held: &[bool; 6],
     variance: f64,
 ) -> Option<[Option<f64>; 6]> {
-    let free: Vec<usize> = (0..crate::eval::NUM_PARAMS)
-        .filter(|&k| k >= 6 || !held[k])
-        .collect();
-    let jtj = DMatrix::from_fn(free.len(), free.len(), |i, j| jtj[free[i]][free[j]]);
-    let variances = inverse_diagonal(&jtj)?;
+    let free: Vec<usize> = (0..parameters).filter(|&k| k >= 6 || !held[k]).collect();
+    let information = DMatrix::from_fn(free.len(), free.len(), |i, j| entry(free[i], free[j]));
+    let variances = inverse_diagonal(&information)?;
     Some(std::array::from_fn(|parameter| {
         let i = free.iter().position(|&k| k == parameter)?;
         Some((variances[i] * variance).sqrt())
