@@ -246,7 +246,7 @@ fn bench_synthetic_and_scaling_write_every_field() {
             .sum::<u64>()
     };
     assert_eq!(total("by_noise_ratio"), 5);
-    assert_eq!(v["by_warning"].as_array().unwrap().len(), 8);
+    assert_eq!(v["by_warning"].as_array().unwrap().len(), 10);
     for c in cases {
         has(
             c,
@@ -266,6 +266,9 @@ fn bench_synthetic_and_scaling_write_every_field() {
                 "refused",
                 "uncertain_warning",
                 "misfit_warning",
+                "off_points_warning",
+                "median_over_size",
+                "median_over_scatter",
                 "attainable",
                 "warned",
             ],
@@ -280,6 +283,13 @@ fn bench_synthetic_and_scaling_write_every_field() {
                 uncertainty.is_some_and(|u| u >= supertoroid::fit::uncertainty::WARNING_SHARE),
                 "{c}"
             );
+        }
+        // the two misfit warnings tile the median distances above rounding
+        let median = c["median_over_size"].as_f64().unwrap();
+        let band = supertoroid::fit::PRECISE_MISFIT;
+        assert_eq!(c["misfit_warning"] == true, band.contains(&median), "{c}");
+        if c["off_points_warning"] == true {
+            assert!(median >= band.end && c["warned"] == true, "{c}");
         }
         // the efficient estimator's share (`suite::attainable`): a probability, and
         // certain on a noise-free cloud

@@ -9,7 +9,7 @@
 
 use super::{Machine, Report, Stats};
 use crate::eval::{Backend, make_evaluator};
-use crate::fit::{FitOptions, Viewpoint, ViewpointSource, fit};
+use crate::fit::{self, FitOptions, Viewpoint, ViewpointSource, fit};
 use crate::model::Pose;
 use crate::suite::attainable;
 use crate::suite::ground_truth::{
@@ -48,8 +48,17 @@ pub struct Case {
     pub refused: bool,
     /// whether the fit carried the `uncertain shape` warning (`fit::uncertainty`)
     pub uncertain_warning: bool,
-    /// whether it carried the warning of a fit off a precise cloud (`fit::PRECISE_MISFIT_WARNING`)
+    /// whether it carried the warning of a fit off a precise cloud (a median distance
+    /// within `fit::PRECISE_MISFIT` of the size)
     pub misfit_warning: bool,
+    /// whether it carried the warning of a fit off its points (`fit::MISFIT_OVER_SCATTER`)
+    pub off_points_warning: bool,
+    /// the fit's median distance to the cloud's points over its size (both warnings above
+    /// read it)
+    pub median_over_size: f64,
+    /// the same median distance over the cloud's own scatter about a smooth surface
+    /// (`fit::scatter::local_scatter` of all its points), which `off its points` reads
+    pub median_over_scatter: f64,
     /// whether it carried any warning at all
     pub warned: bool,
     /// the fit's largest standard error of the shape as a share of the success rule's
@@ -90,6 +99,9 @@ impl Case {
             refused: true,
             uncertain_warning: false,
             misfit_warning: false,
+            off_points_warning: false,
+            median_over_size: f64::NAN,
+            median_over_scatter: f64::NAN,
             warned: false,
             uncertainty: f64::NAN,
             attainable: f64::NAN,
@@ -451,6 +463,13 @@ fn fit_case(
             .warnings
             .iter()
             .any(|w| w.starts_with("off a precise")),
+        off_points_warning: report
+            .warnings
+            .iter()
+            .any(|w| w.starts_with(fit::OFF_ITS_POINTS_WARNING)),
+        median_over_size: report.quality.median_distance / report.fitted.0.size(),
+        median_over_scatter: fit::scatter::local_scatter(&case.points)
+            .map_or(f64::NAN, |s| report.quality.median_distance / s),
         warned: !report.warnings.is_empty(),
         uncertainty: report
             .quality
@@ -530,6 +549,9 @@ fn bands(cases: &[Case]) -> (Vec<Band>, Vec<Band>) {
         }));
         by_warning.push(band(partial, "off a precise cloud".into(), &|c| {
             c.misfit_warning
+        }));
+        by_warning.push(band(partial, "off its points".into(), &|c| {
+            c.off_points_warning
         }));
     }
     (by_ratio, by_warning)
@@ -690,7 +712,7 @@ impl Report for SyntheticReport {
                 100.0 * c.attainable_rate
             );
         }
-        md += "\nBy the noise against the shape: the true noise sigma over the true shape's smallest half-axis (min of a1, a2, a3), and by the fit's warnings: any, `uncertain shape` (standard errors of the shape at half the success rule's tolerances or more, `fit::uncertainty`) and `off a precise cloud` (a median distance between rounding and `fit::PRECISE_MISFIT_WARNING` of the size); a fit can carry several:\n\n| cloud | band | cases | success |\n|---|---|---:|---:|\n";
+        md += "\nBy the noise against the shape: the true noise sigma over the true shape's smallest half-axis (min of a1, a2, a3), and by the fit's warnings: any, `uncertain shape` (standard errors of the shape at half the success rule's tolerances or more, `fit::uncertainty`), `off a precise cloud` (a median distance within `fit::PRECISE_MISFIT` of the size) and `off its points` (from its end, over `fit::MISFIT_OVER_SCATTER` times the cloud's own scatter); a fit can carry several:\n\n| cloud | band | cases | success |\n|---|---|---:|---:|\n";
         for b in self.by_noise_ratio.iter().chain(&self.by_warning) {
             md += &format!(
                 "| {} | {} | {} | {}/{} ({:.0}%) |\n",

@@ -47,8 +47,8 @@ pub use options::{
 use prepare::{Prepared, StartSet, half_extents_about, prepare};
 use report::misfit_warning;
 pub use report::{
-    BackendOut, FitReport, Iterations, PRECISE_MISFIT_WARNING, PointsOut, PoseOut, Quality,
-    SearchOut, Timing, parse_report_json, quality,
+    BackendOut, FitReport, Iterations, PointsOut, PoseOut, Quality, SearchOut, Timing,
+    parse_report_json, quality,
 };
 pub use search::polish::{
     MISFIT_OVER_SCATTER, OFF_ITS_POINTS_WARNING, POLISH_POINTS, PRECISE_MISFIT,

@@ -156,28 +156,22 @@ pub struct FitReport {
 }
 
 /// The warning of a fit that stays off a precise cloud: its median distance above
-/// rounding but under [`PRECISE_MISFIT_WARNING`] of the size, where a noise-free cloud
+/// rounding but under [`super::PRECISE_MISFIT`]'s end of the size, where a noise-free cloud
 /// (a CAD model's, a simulator's) fitted in the right basin leaves rounding (below 1e-6
 /// of the size on the suite's noise-free clouds) and a depth sensor's noise leaves far
 /// more. A real sensor with noise under about 0.15% of the object's size would be warned
 /// too, which the message says.
 pub(super) fn misfit_warning(shape: &Shape, quality: &Quality) -> Option<String> {
     let relative = quality.median_distance / shape.size();
-    (super::PRECISE_MISFIT.start..PRECISE_MISFIT_WARNING)
-        .contains(&relative)
-        .then(|| {
-            format!(
-                "off a precise cloud: the median distance is {relative:.1e} of the size; a \
-                 noise-free cloud (CAD, simulation) fitted in the right basin leaves rounding, so \
-                 unless the sensor's noise is about this small the fit is in a wrong basin and \
-                 sizes and eps may be far off"
-            )
-        })
+    super::PRECISE_MISFIT.contains(&relative).then(|| {
+        format!(
+            "off a precise cloud: the median distance is {relative:.1e} of the size; a \
+             noise-free cloud (CAD, simulation) fitted in the right basin leaves rounding, so \
+             unless the sensor's noise is about this small the fit is in a wrong basin and \
+             sizes and eps may be far off"
+        )
+    })
 }
-
-/// The largest median distance (share of the size) that `misfit_warning` warns at (one
-/// right fit 9% off in size sits at 1.8e-3).
-pub const PRECISE_MISFIT_WARNING: f64 = 1e-3;
 
 /// At most this many points, evenly spread, give a fit's report its [`Quality`]
 /// distances: a depth mask's tens of thousands tell an RMS and a median no better, and
@@ -276,6 +270,8 @@ mod tests {
         let warned = misfit_warning(&shape, &at(1e-4)).expect("a misfit of 1e-4 is warned");
         assert!(warned.starts_with("off a precise cloud"), "{warned}");
         assert!(warned.contains("1.0e-4"), "{warned}");
+        // from the band's end `off its points` judges it against the cloud's scatter
+        assert!(misfit_warning(&shape, &at(super::super::PRECISE_MISFIT.end)).is_none());
         assert!(misfit_warning(&shape, &at(5e-3)).is_none());
     }
 }

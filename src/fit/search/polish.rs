@@ -98,6 +98,12 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitRepo
     if keeps_free_space(fitted) && !keeps_free_space(&polished) {
         return;
     }
+    let median = polished.quality.median_distance;
+    polished
+        .warnings
+        .extend(off_its_points(median, polished.fitted.0.size(), || {
+            p.scatter().map(|s| s * p.norm.scale)
+        }));
     let spent = start.elapsed().as_secs_f64() * 1e3;
     polished.timing_ms = fitted.timing_ms.clone();
     polished.timing_ms.total += spent;
@@ -159,15 +165,16 @@ fn refine_both_readings(
     refined
 }
 
-/// A fit whose median distance is above [`PRECISE_MISFIT`]'s end of its size and more than
-/// [`MISFIT_OVER_SCATTER`] times the cloud's own scatter ([`scatter::local_scatter`]) is
-/// in a wrong basin, or the object is not a supertoroid: the warning that says so.
+/// A fit whose median distance is at least [`PRECISE_MISFIT`]'s end of its size (where
+/// `off a precise cloud` stops warning) and more than [`MISFIT_OVER_SCATTER`] times the
+/// cloud's own scatter ([`scatter::local_scatter`]) is in a wrong basin, or the object is
+/// not a supertoroid: the warning that says so.
 pub(super) fn off_its_points(
-    r: &FitReport,
+    median: f64,
+    size: f64,
     scatter: impl FnOnce() -> Option<f64>,
 ) -> Option<String> {
-    let median = r.quality.median_distance;
-    if median / r.fitted.0.size() < PRECISE_MISFIT.end {
+    if median / size < PRECISE_MISFIT.end {
         return None;
     }
     let scatter = scatter()?;
@@ -186,10 +193,12 @@ pub const OFF_ITS_POINTS_WARNING: &str = "off its points";
 
 /// A median distance over the size in this band is above rounding on a precise cloud: a
 /// noise-free cloud fitted in the right basin leaves rounding (below 1e-6 of the size on
-/// the suite's noise-free clouds), a depth sensor's noise far more. Above its end the
+/// the suite's noise-free clouds), a depth sensor's noise far more. Within it a fit is
+/// warned `off a precise cloud` ([`report`]'s `misfit_warning`); from its end the
 /// cloud's own scatter is the reference instead ([`MISFIT_OVER_SCATTER`]), which tells a
-/// real sensor's noise from a wrong basin.
-pub const PRECISE_MISFIT: std::ops::Range<f64> = 1e-5..3e-3;
+/// real sensor's noise from a wrong basin, so every median distance above rounding
+/// meets one test or the other.
+pub const PRECISE_MISFIT: std::ops::Range<f64> = 1e-5..1e-3;
 
 /// The largest median distance of a fit over the cloud's own scatter (an RMS: a
 /// Gaussian's median distance is 0.67 of it) that carries no warning. On the suite's
@@ -197,3 +206,25 @@ pub const PRECISE_MISFIT: std::ops::Range<f64> = 1e-5..3e-3;
 /// basins 4.2 to 72; a real object is never exactly a supertoroid: the paper's pot
 /// leaves 5.5 (its wall and rim), the roll 2.7, the gear 2.0.
 pub const MISFIT_OVER_SCATTER: f64 = 10.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_fit_is_judged_against_its_scatter_from_where_the_precise_band_ends() {
+        let size = 0.1;
+        let median = |relative: f64| relative * size;
+        // within the precise band the other warning judges it: the scatter is not asked
+        let unasked = || -> Option<f64> { panic!("the scatter was asked for") };
+        assert!(off_its_points(median(5e-4), size, unasked).is_none());
+        // from its end on: far over the cloud's scatter is warned, a sensor's noise is not
+        let at_end = median(PRECISE_MISFIT.end);
+        let warned = off_its_points(at_end, size, || Some(at_end / 15.0)).expect("warned");
+        assert!(warned.starts_with(OFF_ITS_POINTS_WARNING), "{warned}");
+        assert!(warned.contains("15 times"), "{warned}");
+        assert!(off_its_points(at_end, size, || Some(at_end / 2.0)).is_none());
+        // a cloud too small for a scatter is not judged
+        assert!(off_its_points(median(1e-2), size, || None).is_none());
+    }
+}
