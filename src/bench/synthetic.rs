@@ -564,11 +564,11 @@ impl Report for SyntheticReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,refused,uncertain_warning,attainable,misfit_warning,visible_coverage,warned,uncertainty,from_truth\n",
+            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,refused,uncertain_warning,attainable,misfit_warning,off_points_warning,median_over_size,median_over_scatter,visible_coverage,warned,uncertainty,from_truth\n",
         );
         for c in &self.cases {
             s += &format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 c.seed,
                 c.partial,
                 c.noise,
@@ -585,6 +585,9 @@ impl Report for SyntheticReport {
                 c.uncertain_warning,
                 c.attainable,
                 c.misfit_warning,
+                c.off_points_warning,
+                c.median_over_size,
+                c.median_over_scatter,
                 c.visible_coverage,
                 c.warned,
                 c.uncertainty,
