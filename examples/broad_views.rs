@@ -10,10 +10,11 @@
 //! truth's is the search's, one at least as likely as the truth's is the estimator's, and
 //! one without a hole is unscored (the grid model needs one).
 //!
-//! `cargo run --release --example broad_views -- [CASES] [FIRST_SEED]`
+//! `cargo run --release --example broad_views -- [CASES] [FIRST_SEED]`; with
+//! `CASES_CSV=FILE` each case's verdict, warnings and the numbers they read go to FILE.
 
 use supertoroid::eval::CpuEvaluator;
-use supertoroid::fit::{FitOptions, fit};
+use supertoroid::fit::{FitOptions, fit, scatter};
 use supertoroid::suite::broad::{FAMILIES, view};
 use supertoroid::suite::ground_truth::{TruthPoints, basin_gap, compare, model_from_truth};
 
@@ -40,6 +41,9 @@ fn main() {
     // per family: [wrong, right] fits with a warning
     let mut warned_by_family = [[0usize; 2]; 4];
     let mut times = Vec::new();
+    let mut rows = String::from(
+        "seed,family,success,warned,uncertainty,median_over_size,median_over_scatter,warnings\n",
+    );
     for seed in first..first + cases {
         let family = (seed % 4) as usize;
         let case = view(seed);
@@ -63,6 +67,25 @@ fn main() {
         judged[usize::from(success)] += 1;
         warned[usize::from(success)] += usize::from(!report.warnings.is_empty());
         warned_by_family[family][usize::from(success)] += usize::from(!report.warnings.is_empty());
+        let median = report.quality.median_distance;
+        rows += &format!(
+            "{seed},{},{success},{},{},{},{},{}\n",
+            FAMILIES[family],
+            !report.warnings.is_empty(),
+            report
+                .quality
+                .standard_errors
+                .as_ref()
+                .map_or(f64::NAN, |e| e.share_of_tolerance()),
+            median / shape.size(),
+            scatter::local_scatter(&case.points).map_or(f64::NAN, |s| median / s),
+            report
+                .warnings
+                .iter()
+                .map(|w| w.split(':').next().unwrap_or_default())
+                .collect::<Vec<_>>()
+                .join(";")
+        );
         if success {
             right[family] += 1;
             continue;
@@ -90,6 +113,9 @@ fn main() {
             report.search.as_ref().map_or("-", |s| s.estimator.as_str()),
             report.warnings
         );
+    }
+    if let Ok(path) = std::env::var("CASES_CSV") {
+        std::fs::write(&path, rows).expect("CASES_CSV is writable");
     }
     times.sort_by(f64::total_cmp);
     println!(
