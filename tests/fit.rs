@@ -259,6 +259,36 @@ fn bad_clouds_are_rejected_with_a_reason() {
     ));
 }
 
+/// Points that fill a volume (a solid ball of random points half a metre from the
+/// camera, as a wrongly read file or a cloud of spray could give) lie on no surface: the
+/// fit through them is not a confident answer. Their scatter grows with their misfit, so
+/// it is the misfit against the size (`fit::MISFIT_OF_SIZE`) that warns.
+#[test]
+fn a_volume_of_points_is_not_fitted_as_a_confident_surface() {
+    use rand::Rng;
+    let mut rng = supertoroid::synth::rng(3);
+    let mut ball = Vec::new();
+    while ball.len() < 3000 {
+        let p = DVec3::new(
+            rng.random_range(-0.05..0.05),
+            rng.random_range(-0.05..0.05),
+            rng.random_range(-0.05..0.05),
+        );
+        if p.length() < 0.05 {
+            ball.push(p + DVec3::new(0.0, 0.0, 0.5));
+        }
+    }
+    let report = fit(&mut CpuEvaluator::new(), &ball, &FitOptions::default()).unwrap();
+    assert!(
+        report
+            .warnings
+            .iter()
+            .any(|w| w.starts_with(supertoroid::fit::OFF_ITS_POINTS_WARNING)),
+        "{:?}",
+        report.warnings
+    );
+}
+
 #[test]
 fn cli_fit_prints_every_documented_field() {
     let dir = std::env::temp_dir().join(format!("supertoroid-fit-{}", std::process::id()));

@@ -51,7 +51,7 @@ pub use report::{
     parse_report_json, quality,
 };
 pub use search::polish::{
-    MISFIT_OVER_SCATTER, OFF_ITS_POINTS_WARNING, POLISH_POINTS, PRECISE_MISFIT,
+    MISFIT_OF_SIZE, MISFIT_OVER_SCATTER, OFF_ITS_POINTS_WARNING, POLISH_POINTS, PRECISE_MISFIT,
 };
 pub use sight::{FieldOfView, Sight};
 pub use viewpoint::{Viewpoint, ViewpointSource, ViewpointUsed};
