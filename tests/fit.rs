@@ -721,6 +721,25 @@ fn recovers(evaluator: &mut CpuEvaluator, case: &Case, options: &FitOptions) -> 
     (e.success(), report)
 }
 
+/// A suite case as users post it (in its camera's frame, no option but the seed): its
+/// points, the fit, and the fit's pose in the case's world.
+fn fitted_as_posted(
+    evaluator: &mut CpuEvaluator,
+    case: &Case,
+    seed: u64,
+) -> (Vec<DVec3>, FitReport, supertoroid::model::Pose) {
+    use supertoroid::bench::synthetic::{Presentation, presented};
+    let (points, viewpoint, back) = presented(case, Presentation::Camera);
+    let options = FitOptions {
+        seed,
+        viewpoint,
+        ..Default::default()
+    };
+    let report = fit(evaluator, &points, &options).unwrap();
+    let pose = back.compose(&report.fitted.1);
+    (points, report, pose)
+}
+
 /// The robust refinement at the end of stage 2 (a Cauchy loss scaled by the cloud's own
 /// residual spread): on the suite's 20 noise-free single-view clouds with 5-10%
 /// outliers, the fit with it must recover clearly more shapes than without it (measured
@@ -1355,17 +1374,11 @@ fn warned_as_loose_as_the_likelihood(
 /// off when this was written).
 #[test]
 fn a_noisy_view_is_as_uncertain_as_the_likelihood_leaves_it() {
-    use supertoroid::bench::synthetic::{Presentation, category, presented};
+    use supertoroid::bench::synthetic::category;
     let seed = 100_014;
     let (partial, noise, outliers) = category((seed % 1000) as usize % 180);
     let case = make_case(seed, partial, noise, outliers);
-    let (points, viewpoint, _) = presented(&case, Presentation::Camera);
-    let options = FitOptions {
-        seed,
-        viewpoint,
-        ..Default::default()
-    };
-    let report = fit(&mut CpuEvaluator::new(), &points, &options).unwrap();
+    let (points, report, _) = fitted_as_posted(&mut CpuEvaluator::new(), &case, seed);
     assert!(report.noise_modelled, "{:?}", report.search);
     warned_as_loose_as_the_likelihood(&report, &points);
 }
@@ -2195,7 +2208,6 @@ fn broadened_views_through_a_depth_sensor_are_fitted_with_no_options() {
 /// coverage cut; 12 right).
 #[test]
 fn a_views_reading_from_nowhere_that_its_points_do_not_cover_stops_after_round_one() {
-    use supertoroid::bench::synthetic::{Presentation, presented};
     use supertoroid::fit::ViewpointSource;
     let mut evaluator = CpuEvaluator::new();
     let (mut right, mut stopped) = (0, 0);
@@ -2207,13 +2219,7 @@ fn a_views_reading_from_nowhere_that_its_points_do_not_cover_stops_after_round_o
     {
         let seed = 40 + i as u64;
         let case = make_case(seed, true, noise, outliers);
-        let (points, viewpoint, back) = presented(&case, Presentation::Camera);
-        let options = FitOptions {
-            seed,
-            viewpoint,
-            ..Default::default()
-        };
-        let r = fit(&mut evaluator, &points, &options).unwrap();
+        let (_, r, pose) = fitted_as_posted(&mut evaluator, &case, seed);
         assert_eq!(
             r.viewpoint.source,
             ViewpointSource::FrameOrigin,
@@ -2221,9 +2227,7 @@ fn a_views_reading_from_nowhere_that_its_points_do_not_cover_stops_after_round_o
         );
         let s = r.search.as_ref().expect("the default method searches");
         stopped += usize::from(s.other_reading_went_to.as_deref() == Some("round 1"));
-        let (shape, pose) = &r.fitted;
-        let pose = back.compose(pose);
-        right += usize::from(compare((&case.shape, &case.pose), (shape, &pose)).success());
+        right += usize::from(compare((&case.shape, &case.pose), (&r.fitted.0, &pose)).success());
     }
     assert!(
         stopped >= 6,
@@ -2239,17 +2243,10 @@ fn a_views_reading_from_nowhere_that_its_points_do_not_cover_stops_after_round_o
 /// not search.
 #[test]
 fn the_report_says_what_the_search_tried_and_kept() {
-    use supertoroid::bench::synthetic::{Presentation, presented};
     use supertoroid::fit::{Method, Viewpoint};
     let mut evaluator = CpuEvaluator::new();
     let case = make_case(7, true, 0.02, 0.0);
-    let (points, viewpoint, _) = presented(&case, Presentation::Camera);
-    let options = FitOptions {
-        seed: 7,
-        viewpoint,
-        ..Default::default()
-    };
-    let r = fit(&mut evaluator, &points, &options).unwrap();
+    let (_, r, _) = fitted_as_posted(&mut evaluator, &case, 7);
     let s = r.search.expect("the default method searches");
     assert!(
         s.starts >= s.kept && s.kept >= 1 && s.refined >= s.kept,
@@ -2380,20 +2377,13 @@ fn every_tuning_constant_of_the_fit_is_in_docs_constants_md() {
 /// it is warned `off its points`.
 #[test]
 fn a_noise_free_view_a_little_off_its_points_is_not_a_confident_answer() {
-    use supertoroid::bench::synthetic::{Presentation, category, presented};
+    use supertoroid::bench::synthetic::category;
     let mut evaluator = CpuEvaluator::new();
     for (first, seed) in [(90_000u64, 90_099u64), (140_000, 140_030)] {
         let (partial, noise, outliers) = category((seed - first) as usize);
         assert_eq!((partial, noise), (true, 0.0));
         let case = make_case(seed, partial, noise, outliers);
-        let (points, viewpoint, back) = presented(&case, Presentation::Camera);
-        let options = FitOptions {
-            seed,
-            viewpoint,
-            ..Default::default()
-        };
-        let report = fit(&mut evaluator, &points, &options).unwrap();
-        let pose = back.compose(&report.fitted.1);
+        let (_, report, pose) = fitted_as_posted(&mut evaluator, &case, seed);
         let right = compare((&case.shape, &case.pose), (&report.fitted.0, &pose)).success();
         let relative = report.quality.median_distance / report.fitted.0.size();
         eprintln!(
