@@ -279,14 +279,7 @@ fn a_volume_of_points_is_not_fitted_as_a_confident_surface() {
         }
     }
     let report = fit(&mut CpuEvaluator::new(), &ball, &FitOptions::default()).unwrap();
-    assert!(
-        report
-            .warnings
-            .iter()
-            .any(|w| w.starts_with(supertoroid::fit::OFF_ITS_POINTS_WARNING)),
-        "{:?}",
-        report.warnings
-    );
+    assert!(warned_off_its_points(&report), "{:?}", report.warnings);
 }
 
 #[test]
@@ -850,6 +843,13 @@ fn warned_off_precise(report: &FitReport) -> bool {
         .warnings
         .iter()
         .any(|w| w.starts_with("off a precise"))
+}
+
+fn warned_off_its_points(report: &FitReport) -> bool {
+    report
+        .warnings
+        .iter()
+        .any(|w| w.starts_with(supertoroid::fit::OFF_ITS_POINTS_WARNING))
 }
 
 /// A depth sensor saw through the space in front of its points: told where the camera
@@ -2398,10 +2398,7 @@ fn a_noise_free_view_a_little_off_its_points_is_not_a_confident_answer() {
         // past the precise band stands far over it
         if !right && relative >= supertoroid::fit::PRECISE_MISFIT.end {
             assert!(
-                report
-                    .warnings
-                    .iter()
-                    .any(|w| w.starts_with(supertoroid::fit::OFF_ITS_POINTS_WARNING)),
+                warned_off_its_points(&report),
                 "{seed}: {:?}",
                 report.warnings
             );
