@@ -231,11 +231,7 @@ fn searched_once(
             // (a fit the likelihood refined to a noise too small for the model to matter
             // is a precise one: the polish passes it by)
             r.noise_modelled = best.modelled && noisy(p, &best.candidate, best.sigma);
-            let median = r.quality.median_distance;
-            r.warnings
-                .extend(polish::off_its_points(median, r.fitted.0.size(), || {
-                    p.scatter().map(|s| s * p.norm.scale)
-                }));
+            polish::warn_off_its_points(&mut r, p);
             r.search = Some(f.tried);
             // (and the reports' own checks as stage 2, so that the parts make the total)
             let total = start.elapsed().as_secs_f64() * 1e3;

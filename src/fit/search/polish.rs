@@ -98,12 +98,7 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitRepo
     if keeps_free_space(fitted) && !keeps_free_space(&polished) {
         return;
     }
-    let median = polished.quality.median_distance;
-    polished
-        .warnings
-        .extend(off_its_points(median, polished.fitted.0.size(), || {
-            p.scatter().map(|s| s * p.norm.scale)
-        }));
+    warn_off_its_points(&mut polished, &p);
     let spent = start.elapsed().as_secs_f64() * 1e3;
     polished.timing_ms = fitted.timing_ms.clone();
     polished.timing_ms.total += spent;
@@ -165,16 +160,20 @@ fn refine_both_readings(
     refined
 }
 
+/// Adds [`off_its_points`]'s warning to the report `r` of a fit of `p`.
+pub(super) fn warn_off_its_points(r: &mut FitReport, p: &Prepared) {
+    let (median, size) = (r.quality.median_distance, r.fitted.0.size());
+    r.warnings.extend(off_its_points(median, size, || {
+        p.scatter().map(|s| s * p.norm.scale)
+    }));
+}
+
 /// A fit whose median distance is at least [`PRECISE_MISFIT`]'s end of its size (where
 /// `off a precise cloud` stops warning) and more than [`MISFIT_OVER_SCATTER`] times the
 /// cloud's own scatter ([`scatter::local_scatter`]) is in a wrong basin, or the object is
 /// not a supertoroid; one over [`MISFIT_OF_SIZE`] of its size fits no surface the points
 /// pin down: the warning that says so.
-pub(super) fn off_its_points(
-    median: f64,
-    size: f64,
-    scatter: impl FnOnce() -> Option<f64>,
-) -> Option<String> {
+fn off_its_points(median: f64, size: f64, scatter: impl FnOnce() -> Option<f64>) -> Option<String> {
     if median / size < PRECISE_MISFIT.end {
         return None;
     }
