@@ -160,15 +160,17 @@ pub struct FitReport {
 /// (a CAD model's, a simulator's) fitted in the right basin leaves rounding (below 1e-6
 /// of the size on the suite's noise-free clouds) and a depth sensor's noise leaves far
 /// more. A real sensor with noise under about 0.15% of the object's size would be warned
-/// too, which the message says.
+/// too, which the message says (on the broadened views, half-metre rings seen by a
+/// D435-like camera: `docs/fit.md`, "Warnings").
 pub(super) fn misfit_warning(shape: &Shape, quality: &Quality) -> Option<String> {
     let relative = quality.median_distance / shape.size();
     super::PRECISE_MISFIT.contains(&relative).then(|| {
         format!(
             "off a precise cloud: the median distance is {relative:.1e} of the size; a \
              noise-free cloud (CAD, simulation) fitted in the right basin leaves rounding, so \
-             unless the sensor's noise is about this small the fit is in a wrong basin and \
-             sizes and eps may be far off"
+             unless the sensor's noise is about this small (a precise scanner, or an object \
+             large against a depth camera's millimetre) the fit is in a wrong basin and sizes \
+             and eps may be far off"
         )
     })
 }
