@@ -461,6 +461,7 @@ fn bench_models_judges_the_choice_between_supertoroid_and_superellipsoid() {
                 "success",
                 "chamfer",
                 "t_total_ms",
+                "warned",
             ],
         );
         let kind = if i % 2 == 0 {
@@ -493,4 +494,7 @@ fn bench_models_judges_the_choice_between_supertoroid_and_superellipsoid() {
     }
     let auto = std::fs::read_to_string(out.join("models.csv")).unwrap();
     assert!(auto.lines().count() == 5, "{auto}");
+    assert!(auto.starts_with("seed,") && auto.lines().next().unwrap().ends_with(",warned"));
+    let md = std::fs::read_to_string(out.join("models.md")).unwrap();
+    assert!(md.contains("Warnings: "), "{md}");
 }

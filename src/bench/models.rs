@@ -34,6 +34,8 @@ pub struct ModelCase {
     /// the BIC margin of the choice (NaN where only one model was fitted)
     pub margin: f64,
     pub t_total_ms: f64,
+    /// whether the fit carried any warning
+    pub warned: bool,
 }
 
 impl ModelCase {
@@ -52,6 +54,7 @@ impl ModelCase {
             chamfer: f64::NAN,
             margin: f64::NAN,
             t_total_ms: f64::NAN,
+            warned: false,
         }
     }
 }
@@ -139,6 +142,7 @@ fn judged(
         chamfer,
         margin: report.model.bic.and_then(|b| b.margin).unwrap_or(f64::NAN),
         t_total_ms: report.timing_ms.total,
+        warned: !report.warnings.is_empty(),
         ..refused
     })
 }
@@ -150,11 +154,11 @@ impl Report for ModelReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "seed,kind,partial,noise,outliers,chosen,model_right,success,chamfer,margin,t_total_ms\n",
+            "seed,kind,partial,noise,outliers,chosen,model_right,success,chamfer,margin,t_total_ms,warned\n",
         );
         for c in &self.cases {
             s += &format!(
-                "{},{:?},{},{},{},{},{},{},{:.5},{:.2},{:.1}\n",
+                "{},{:?},{},{},{},{},{},{},{:.5},{:.2},{:.1},{}\n",
                 c.seed,
                 c.kind,
                 c.partial,
@@ -165,7 +169,8 @@ impl Report for ModelReport {
                 c.success,
                 c.chamfer,
                 c.margin,
-                c.t_total_ms
+                c.t_total_ms,
+                c.warned
             );
         }
         s
@@ -210,6 +215,16 @@ impl Report for ModelReport {
                 percentile(times, 0.95),
             );
         }
+        let (wrong, right): (Vec<&ModelCase>, Vec<&ModelCase>) =
+            self.cases.iter().partition(|c| !c.success);
+        let warned = |cases: &[&ModelCase]| cases.iter().filter(|c| c.warned).count();
+        md += &format!(
+            "\nWarnings: {} of the {} wrong fits carry one, {} of the {} right ones.\n",
+            warned(&wrong),
+            wrong.len(),
+            warned(&right),
+            right.len()
+        );
         md
     }
 }
