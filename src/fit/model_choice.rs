@@ -22,7 +22,9 @@
 //! (`search::batch`'s model twins).
 
 use super::search::Sample;
-use super::{FieldOfView, FitReport, Sight, inferred_view::normalised_stride};
+use super::{
+    FieldOfView, FitError, FitOptions, FitReport, Sight, inferred_view::normalised_stride,
+};
 use serde::Serialize;
 
 /// The most points of a cloud scored (an even stride through it).
@@ -346,6 +348,35 @@ fn least_value(f: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
         }
     }
     fx
+}
+
+/// The fits a cloud's [`Model`] asks for: the supertoroid's (a4 free), the
+/// superellipsoid's (a4 held at 0), or both for auto (in that order). A
+/// known a4 decides the model itself.
+pub(super) fn fits_of_model(o: &FitOptions) -> Result<Vec<FitOptions>, FitError> {
+    let as_model = |model: Model| {
+        let mut o = FitOptions { model, ..o.clone() };
+        if model == Model::Superellipsoid {
+            o.known_shape[3] = Some(0.0);
+        }
+        o
+    };
+    Ok(match (o.model, o.known_shape[3]) {
+        (Model::Superellipsoid, Some(a4)) if a4 != 0.0 => {
+            return Err(FitError::InvalidOption(format!(
+                "model superellipsoid has a4 = 0, but a4 = {a4} is given as known"
+            )));
+        }
+        (Model::Auto, Some(a4)) if a4 != 0.0 => vec![as_model(Model::Supertoroid)],
+        (Model::Auto, Some(_)) | (Model::Superellipsoid, _) => {
+            vec![as_model(Model::Superellipsoid)]
+        }
+        (Model::Supertoroid, _) => vec![o.clone()],
+        (Model::Auto, None) => vec![
+            as_model(Model::Supertoroid),
+            as_model(Model::Superellipsoid),
+        ],
+    })
 }
 
 #[cfg(test)]

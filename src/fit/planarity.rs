@@ -23,7 +23,7 @@
 //! many points); empty cells that the empty border cannot reach, edge to edge, are
 //! enclosed. At least [`MIN_HOLE_CELLS`] of them make a hole.
 
-use super::{scatter, starts};
+use super::{FitError, check_cloud, scatter, starts};
 use crate::scene::plane::fit_plane;
 use glam::{DVec2, DVec3};
 
@@ -171,6 +171,23 @@ fn enclosed_empty_cells(points: &[DVec2]) -> usize {
         }
     }
     (0..w * h).filter(|&i| !occupied[i] && !reached[i]).count()
+}
+
+/// [`FitError::NoObject`] for a bare plane. A flat ring seen face-on is fitted: where
+/// its thickness is lost in the noise, its standard errors say so
+/// ([`uncertainty`]).
+pub(super) fn screen_for_an_object(points: &[DVec3], seed: u64) -> Result<(), FitError> {
+    // `check_cloud`'s refusals come first, with their own errors
+    check_cloud(points)?;
+    match planarity(points, seed) {
+        Planarity::Solid | Planarity::FlatRing { .. } => Ok(()),
+        Planarity::BarePlane { share, tolerance } => Err(FitError::NoObject(format!(
+            "{:.0}% of the points lie on one plane (within {tolerance:.1e} in the cloud's units, three times their \
+             own scatter) and enclose no hole: a bare surface such as a table, or one face \
+             seen head-on, whose depth no fit can tell",
+            100.0 * share
+        ))),
+    }
 }
 
 #[cfg(test)]

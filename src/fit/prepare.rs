@@ -586,3 +586,30 @@ pub(super) fn half_extents_about(candidate: &Candidate, points: &[DVec3]) -> DVe
         e.max((inverse * (*p - candidate.pose.translation)).abs())
     })
 }
+
+/// A size reaching past the points by more than this is not supported by them (the
+/// ground-truth suite's true shapes reach at most 0.92 of their noisy clouds, full or
+/// single view; the pot's stretched fits 2.5 and more).
+pub const MAX_OVERREACH: f64 = 1.5;
+
+/// Stage 1's [`SolverOptions::merge_tolerance`] (normalised units, radians). Starts that
+/// close on one another converge to one solution: at 1e-2 apart the paper clouds' starts
+/// ended within 1e-4 of each other.
+pub(super) const MERGE_TOLERANCE: f64 = 1e-2;
+
+/// How far a candidate's sizes reach beyond the cloud: the largest ratio, over the
+/// canonical axes, of a1, a2, a3 to the cloud's half-extent about the candidate's centre
+/// along that axis. A shape the points support has at most about 1, on a single view
+/// too (the silhouette spans the object across the view, the front face lies a
+/// half-extent from the centre, and a1, a2 are at most the outer radii a1(1 + a4),
+/// a2(1 + a4)). The outer radii themselves are not used: the ring the paper fits to its
+/// pot reaches twice past the pot's wall on the outside.
+/// Least squares alone happily stretches a size to its bound where no point watches
+/// (measured on the paper's pot: a cylinder ten times taller than the pot, or a body
+/// stretched sideways, each fitted the wall with a lower cost than the true supertoroid).
+pub fn overreach(candidate: &Candidate, points: &[DVec3]) -> f64 {
+    let extent = half_extents_about(candidate, points);
+    let s = &candidate.shape;
+    let reach = DVec3::new(s.a1, s.a2, s.a3);
+    (reach / extent.max(DVec3::splat(1e-9))).max_element()
+}

@@ -2,7 +2,9 @@
 //! answer, documented in the README), the quality of the fit against all input points,
 //! and the warnings a fit carries when its numbers should not be taken at face value.
 
-use super::Method;
+use super::prepare::Prepared;
+use super::{Method, ModelOut, ViewpointUsed, coverage, free_space, search, uncertainty};
+use crate::eval::Candidate;
 use crate::model::{Pose, Shape, meridian_distance, meridian_residual_with_gradient};
 use glam::DVec3;
 use serde::Serialize;
@@ -249,6 +251,88 @@ pub fn parse_report_json(bytes: &[u8]) -> Result<(Shape, Pose), String> {
     let object: crate::model::FittedObject =
         serde_json::from_slice(bytes).map_err(|e| e.to_string())?;
     object.validated()
+}
+
+/// The report of one cloud's chosen solution, in world units.
+pub(super) fn report(
+    p: &Prepared,
+    candidate: &Candidate,
+    stage2_iterations: usize,
+    modelled_sigma: Option<f64>,
+    stage1_iterations: usize,
+    backend: BackendOut,
+) -> FitReport {
+    let (shape, pose) = p.norm.to_world(candidate);
+    let mut quality = quality_on(&shape, &pose, p.points, QUALITY_SAMPLE);
+    // the noise model's sigma, where it ran, is the better estimate (the first-order
+    // distance reads noise off a thin section's curved faces short)
+    if let Some(sigma) = modelled_sigma {
+        quality.noise_sigma = sigma * p.norm.scale;
+    }
+    quality.visible_coverage = p
+        .sight()
+        .map(|s| coverage::visible_coverage(candidate, &p.stage2_pts, s));
+    quality.standard_errors =
+        uncertainty::standard_errors(&shape, &pose, p.points, &p.known.map(|k| k.is_some()));
+    // a fit the likelihood refined: each error as loose as the likelihood leaves it
+    if let (Some(errors), Some(sigma)) = (quality.standard_errors.as_mut(), modelled_sigma) {
+        let sample = search::Sample::new(&p.stage2_pts, p.sight(), false);
+        let data = sample.data();
+        let held = p.known.map(|k| k.is_some());
+        if let Some(by_likelihood) =
+            uncertainty::likelihood_errors(&data, candidate, sigma, p.points.len(), &held)
+        {
+            *errors = errors.max(by_likelihood);
+        }
+    }
+    let warnings = quality
+        .standard_errors
+        .as_ref()
+        .and_then(uncertainty::warning)
+        .into_iter()
+        .chain(misfit_warning(&shape, &quality))
+        .collect();
+    let r = pose.matrix();
+    let q = pose.rotation;
+    FitReport {
+        method: p.method,
+        model: ModelOut::requested(&shape),
+        shape,
+        pose: PoseOut {
+            translation: pose.translation.to_array(),
+            rotation: [
+                r.row(0).to_array(),
+                r.row(1).to_array(),
+                r.row(2).to_array(),
+            ],
+            quaternion_wxyz: [q.w, q.x, q.y, q.z],
+        },
+        quality,
+        // set by the caller once every report of the group is done
+        timing_ms: Timing::default(),
+        iterations: Iterations {
+            stage1: stage1_iterations,
+            stage2: stage2_iterations,
+        },
+        backend,
+        // set by `fit_batch` from the viewpoint's resolution
+        viewpoint: ViewpointUsed::default(),
+        points: PointsOut {
+            input: p.points.len(),
+            stage1: p.stage1_pts.len(),
+            stage2: p.stage2_pts.len(),
+            polish: None,
+            isolated: 0,
+            thinned_to: None,
+        },
+        // set by the search
+        search: None,
+        warnings,
+        fitted: (shape, pose),
+        free_space_violation: (!p.stage2_free.is_empty())
+            .then(|| free_space::violated_fraction(candidate, &p.stage2_free)),
+        noise_modelled: modelled_sigma.is_some(),
+    }
 }
 
 #[cfg(test)]

@@ -475,6 +475,20 @@ mod tests {
         assert_eq!(held.len(), 3);
         assert!(held.iter().all(|s| s.shape.a4 == 0.0));
     }
+
+    #[test]
+    fn a_start_behind_the_skin_moves_away_from_the_sensor_across_the_axis() {
+        let start = Candidate {
+            shape: Shape::new(0.2, 0.2, 0.05, 2.0, 1.0, 1.0),
+            pose: Pose::new(DQuat::IDENTITY, DVec3::ZERO),
+        };
+        // seen from -y and a little above: moved +y by the mean radius, not along z
+        let moved = behind_the_skin(&start, DVec3::new(0.0, -5.0, 1.0)).unwrap();
+        assert!((moved.pose.translation - DVec3::new(0.0, 0.4, 0.0)).length() < 1e-12);
+        assert_eq!(moved.shape, start.shape);
+        // seen into the hole: none
+        assert!(behind_the_skin(&start, DVec3::new(0.5, 0.0, 5.0)).is_none());
+    }
 }
 
 /// `start` (centred on the cloud's centroid, the origin of the normalised frame) moved

@@ -9,6 +9,7 @@
 //! searching the cloud in both readings and keeping the likelier under the noise model
 //! (`fit_batch_searched` in `fit::search::batch`).
 
+use super::FitOptions;
 use glam::DVec3;
 use serde::Serialize;
 
@@ -253,6 +254,26 @@ pub fn request_schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schem
         ))
         .build();
     Schema::OneOf(one_of).into()
+}
+
+/// Each cloud's options with its viewpoint resolved ([`viewpoint::resolve`]), and what
+/// was used and why.
+pub(super) fn resolve_viewpoints(
+    clouds: &[(&[DVec3], &FitOptions)],
+) -> Vec<(FitOptions, ViewpointUsed)> {
+    clouds
+        .iter()
+        .map(|(points, o)| {
+            let (viewpoint, used) = resolve(o.viewpoint, points);
+            (
+                FitOptions {
+                    viewpoint,
+                    ..(*o).clone()
+                },
+                used,
+            )
+        })
+        .collect()
 }
 
 #[cfg(test)]

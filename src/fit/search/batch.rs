@@ -279,6 +279,24 @@ fn model_twins(clouds: &[(&[DVec3], &FitOptions)]) -> Vec<Option<usize>> {
         .collect()
 }
 
+/// The start of the warning of a viewpoint the fit found contradicted by its points.
+pub const VIEWPOINT_IGNORED: &str = "viewpoint ignored";
+
+/// The warning of a viewpoint that a share `violated` of the lines of sight contradicts.
+pub(super) fn viewpoint_ignored_warning(violated: f64) -> String {
+    format!(
+        "{VIEWPOINT_IGNORED}: {:.0}% of the lines of sight from it to the points pass \
+         through the object fitted with it (more than {:.0}%), so the sensor was not \
+         there, or the viewpoint is in another frame than the points; fitted without it",
+        100.0 * violated,
+        100.0 * free_space::MAX_VIOLATED_FRACTION
+    )
+}
+
+/// Why an inferred viewpoint is dropped for a view from nowhere.
+pub(super) const ALL_ROUND: &str = "the points are more likely spread all round the object than \
+                          seen from there: fitted as a view from nowhere";
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -32,13 +32,17 @@
 //! does not: a surface shown to the sensor without points on it, noise that blurs a thin
 //! section, outliers.
 
+pub(super) mod basins;
 pub(super) mod batch;
+pub(super) mod estimator;
 pub mod polish;
 mod rounds;
 
 use super::*;
 use crate::eval::Normalization;
 use crate::fit::objective::{self, Data, Sensor};
+use basins::most_likely_distinct;
+use estimator::{collapsed, collapsed_section, noisy};
 use rayon::prelude::*;
 
 /// Least-squares iterations of round 1 (starts a few iterations apart have found their
@@ -232,26 +236,6 @@ impl Scored {
     }
 }
 
-/// Whether a fit with noise `sigma` (normalised) is noisy enough for least squares to be
-/// biased, so that the likelihood refines it: [`LIKELIHOOD_VIEW_NOISE_RATIO`] of its
-/// thinnest half-axis with a viewpoint; without one [`LIKELIHOOD_NOISE_RATIO`], and only
-/// where the points cover the surface all round ([`LIKELIHOOD_MIN_COVERAGE`]: a
-/// one-sided cloud from nowhere would have its unseen side shrunk).
-pub(super) fn noisy(p: &Prepared, c: &Candidate, sigma: f64) -> bool {
-    if !p.noise_model {
-        return false;
-    }
-    let thinnest = c.shape.thinnest_half_axis();
-    match p.viewpoint {
-        Some(_) => sigma >= LIKELIHOOD_VIEW_NOISE_RATIO * thinnest,
-        None => {
-            sigma >= LIKELIHOOD_NOISE_RATIO * thinnest
-                && c.shape.a4 > 1.0
-                && likelihood::surface_coverage(&p.stage2_pts, c, sigma) >= LIKELIHOOD_MIN_COVERAGE
-        }
-    }
-}
-
 /// Whether `viewpoint` sees `candidate` across its axis: at least
 /// [`HOLLOW_ACROSS_DEGREES`] from it, where a hole's inside may not show.
 pub(super) fn seen_across_its_axis(candidate: &Candidate, viewpoint: DVec3) -> bool {
@@ -309,24 +293,6 @@ fn scored(
             }
         })
         .collect())
-}
-
-/// The best `keep` of one cloud's candidates in distinct basins, most likely first.
-fn most_likely_distinct(mut candidates: Vec<Scored>, keep: usize) -> Vec<Scored> {
-    candidates.sort_by(|a, b| a.rank(b));
-    let mut kept: Vec<Scored> = Vec::new();
-    for c in candidates {
-        if kept.len() == keep {
-            break;
-        }
-        if kept
-            .iter()
-            .all(|k| distinct_basin(&k.candidate, &c.candidate))
-        {
-            kept.push(c);
-        }
-    }
-    kept
 }
 
 /// What the search found for one cloud: the fit, and the work it took.
@@ -495,14 +461,6 @@ fn converge(p: &Prepared, sample: &Sample, best: Scored, iterations: usize) -> S
         overreaches: p.overreaches(&r.candidate, &p.stage2_pts),
         ..best
     }
-}
-
-/// A likelihood fit that explains the points only by blurring them far more than least
-/// squares found ([`MAX_SIGMA_GROWTH`]), or whose section is thinner than its blur
-/// ([`MIN_SECTION_SIGMAS`]), has collapsed: blur that wide hides any section.
-fn collapsed(r: &objective::Refined, sigma: f64) -> bool {
-    r.candidate.shape.thinnest_half_axis() < MIN_SECTION_SIGMAS * r.sigma
-        || r.sigma > MAX_SIGMA_GROWTH * sigma.max(REFINE_SIGMA_FLOOR)
 }
 
 /// A candidate solved by robust least squares (on the stage-2 set `set`, uploaded), and
