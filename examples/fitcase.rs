@@ -88,6 +88,7 @@ fn main() {
                 bounds: options.bounds(),
                 fixed_shape: [false; 6],
                 fixed_axis: false,
+                deadline: None,
             };
             let sigma = (case.noise * case.shape.size() / norm.scale).max(2e-3);
             let truth = norm.candidate(&case.shape, &case.pose);
@@ -128,6 +129,7 @@ fn main() {
                 bounds: options.bounds(),
                 fixed_shape: [false; 6],
                 fixed_axis: false,
+                deadline: None,
             };
             let e = |c: &supertoroid::eval::Candidate| {
                 let (s, p) = norm.to_world(c);

@@ -44,6 +44,7 @@ fn main() {
             bounds: options.bounds(),
             fixed_shape: [false; 6],
             fixed_axis: false,
+            deadline: None,
         };
         let t = Instant::now();
         let old = likelihood::refine(
@@ -70,6 +71,7 @@ fn main() {
             bounds: options.bounds(),
             fixed_shape: [false; 6],
             fixed_axis: false,
+            deadline: None,
         };
         let new = objective::refine(&data, &truth, sigma, &olimits, 60);
         t_new.push(t.elapsed().as_secs_f64() * 1e3);

@@ -1520,6 +1520,7 @@ fn the_fine_grid_takes_the_section_bias_out_of_the_noise_model() {
         bounds: options.bounds(),
         fixed_shape: [false; 6],
         fixed_axis: false,
+        deadline: None,
     };
     let (mut usual, mut fine) = (Vec::new(), Vec::new());
     for (first_seed, seed) in [(40000, 40008), (50000, 50098), (100000, 100044)] {
@@ -1921,11 +1922,12 @@ fn the_time_of_a_fit_is_accounted_for_by_stage() {
     );
 }
 
-/// A fit whose time has reached its budget (`FitOptions::time_budget_ms`) skips the
-/// polish and names it; the search's fit still comes back. A budget that is no positive
-/// number of milliseconds is refused.
+/// A fit whose time has reached its budget (`FitOptions::time_budget_ms`) cuts its
+/// search's likelihood refinements short and skips the polish, names both and warns; the
+/// search's fit still comes back. A budget that is no positive number of milliseconds is
+/// refused; one past what a clock holds is no budget (the same fit as none).
 #[test]
-fn a_spent_time_budget_leaves_the_polish_out_and_says_so() {
+fn a_spent_time_budget_cuts_the_search_short_leaves_the_polish_out_and_says_so() {
     let mut evaluator = CpuEvaluator::new();
     let seed = 10_017;
     let case = suite_case(10_000, seed);
@@ -1940,7 +1942,39 @@ fn a_spent_time_budget_leaves_the_polish_out_and_says_so() {
         t.over_budget.iter().any(|c| c == "polish-on-more-points"),
         "{t:?}"
     );
+    assert!(t.over_budget.iter().any(|c| c == "search"), "{t:?}");
+    assert!(
+        report
+            .warnings
+            .iter()
+            .any(|w| w.starts_with("cut short by the time budget")),
+        "{:?}",
+        report.warnings
+    );
     assert!(report.shape.a1 > 0.0);
+    let unbounded = fit(
+        &mut evaluator,
+        &case.points,
+        &view_options(seed, &case, true),
+    )
+    .unwrap();
+    let past_any_clock = fit(
+        &mut evaluator,
+        &case.points,
+        &FitOptions {
+            time_budget_ms: Some(1e300),
+            ..view_options(seed, &case, true)
+        },
+    )
+    .unwrap();
+    assert_eq!(past_any_clock.fitted, unbounded.fitted);
+    assert!(past_any_clock.timing_ms.over_budget.is_empty());
+    assert!(
+        unbounded
+            .warnings
+            .iter()
+            .all(|w| !w.starts_with("cut short"))
+    );
     for bad in [0.0, -5.0, f64::NAN] {
         let refused = fit(
             &mut evaluator,

@@ -321,8 +321,8 @@ pub struct FitArgs {
     /// through
     #[arg(long, allow_hyphen_values = true)]
     pub viewpoint: Option<String>,
-    /// milliseconds after which the noise model's last polish no longer starts; the
-    /// search always completes (default: no budget)
+    /// time budget in milliseconds: no likelihood step of the search or the polish is
+    /// taken past it; the least-squares rounds always complete (default: no budget)
     #[arg(long)]
     pub time_budget_ms: Option<f64>,
     /// also write the fitted surface as a PLY mesh with normals

@@ -572,6 +572,7 @@ fn refine_problem(
         decrease: STOP_DECREASE,
         step: 1e-6,
         predicted: WITHIN_NATS / problem.problem.points.len() as f64,
+        deadline: limits.deadline,
     };
     let minimum = minimise(&mut problem, x, &limits.held(start), &stopping);
     let x = minimum.x;
@@ -764,6 +765,7 @@ mod tests {
             bounds: Bounds::new(1e-3, 5.0, 10.0, 0.1, 2.0),
             fixed_shape: [true, false, false, false, false, false],
             fixed_axis: true,
+            deadline: None,
         };
         let r = refine(&points, &start, 0.02, 0.05, None, &limits, MAX_ITERATIONS).unwrap();
         let s = r.candidate.shape;

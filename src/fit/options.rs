@@ -144,9 +144,10 @@ pub struct FitOptions {
     /// optional stages left out, for ablations ([`ablation`]); empty for every caller
     /// but the benchmarks
     pub skip: Vec<ablation::Stage>,
-    /// the polish starts on a cloud only while its time so far is under this many
-    /// milliseconds; the search always completes. A stage left out for it is named in
-    /// `timing_ms.over_budget`.
+    /// the fit's time budget in milliseconds, counted from the cloud's preparation: no
+    /// likelihood step of the search or the polish is taken past it, and the polish
+    /// starts only while the fit's time is under it; the least-squares rounds always
+    /// complete. A stage cut short or left out for it is named in `timing_ms.over_budget`.
     /// None (the default): no budget, and the fit does not depend on the machine's speed.
     pub time_budget_ms: Option<f64>,
 }

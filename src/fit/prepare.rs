@@ -81,6 +81,9 @@ pub(super) struct Prepared<'a> {
     pub(super) scatter: std::sync::OnceLock<Option<f64>>,
     /// optional stages left out ([`FitOptions::skip`])
     pub(super) skip: Vec<Stage>,
+    /// the time budget's end, counted from the preparation's start
+    /// ([`FitOptions::time_budget_ms`]): no likelihood step is taken past it
+    pub(super) deadline: Option<Instant>,
 }
 
 pub(super) fn prepare<'a>(
@@ -88,6 +91,7 @@ pub(super) fn prepare<'a>(
     o: &FitOptions,
     start_set: StartSet,
 ) -> Result<Prepared<'a>, FitError> {
+    let started = Instant::now();
     check_options(o)?;
     let (axes, _) = check_cloud(points)?;
     let norm = Normalization::of(points);
@@ -178,6 +182,10 @@ pub(super) fn prepare<'a>(
         known_axis: o.known_axis.is_some(),
         scatter: std::sync::OnceLock::new(),
         skip: o.skip.clone(),
+        // (a budget past what a clock can hold is no budget)
+        deadline: o.time_budget_ms.and_then(|budget| {
+            started.checked_add(std::time::Duration::try_from_secs_f64(budget / 1e3).ok()?)
+        }),
     })
 }
 
@@ -505,6 +513,7 @@ impl Prepared<'_> {
             bounds: self.supported_bounds(start),
             fixed_shape: self.known.map(|k| k.is_some()),
             fixed_axis: self.known_axis,
+            deadline: self.deadline,
         }
     }
 

@@ -52,8 +52,10 @@ pub struct Timing {
     pub noise_model: f64,
     #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub stages: std::collections::BTreeMap<String, f64>,
-    /// the stages that did not run because the fit's time had reached its budget
-    /// ([`super::FitOptions::time_budget_ms`])
+    /// the stages that did not run, or were cut short, because the fit's time had
+    /// reached its budget ([`super::FitOptions::time_budget_ms`]): `search` where its
+    /// likelihood steps stopped there, `polish-on-more-points` where the polish did not
+    /// start
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub over_budget: Vec<String>,
     pub total: f64,

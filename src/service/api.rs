@@ -60,9 +60,9 @@ pub struct FitRequestOptions {
     #[schema(schema_with = crate::fit::viewpoint::request_schema)]
     #[serde(default)]
     pub viewpoint: Option<Viewpoint>,
-    /// milliseconds after which the noise model's last polish no longer starts (default:
-    /// no budget; the search always completes; a stage left out is named in
-    /// `timing_ms.over_budget`)
+    /// time budget in milliseconds: no likelihood step of the search or the polish is
+    /// taken past it; the least-squares rounds always complete (default: no budget; a
+    /// stage cut short or left out is named in `timing_ms.over_budget`)
     pub time_budget_ms: Option<f64>,
     /// pipeline: default (one bounded search on the noise model) or paper (the paper's
     /// procedure, a baseline)

@@ -62,6 +62,8 @@ pub struct Stopping {
     /// the decrease the undamped step predicts, g·H⁻¹g / 2 (the quadratic model's way
     /// to its minimum), below which the point is taken as the minimum (0: never)
     pub predicted: f64,
+    /// no step is tried past this time (the caller's time budget); None: no limit
+    pub deadline: Option<std::time::Instant>,
 }
 
 /// What the loop held fixed.
@@ -142,7 +144,12 @@ pub fn minimise(
     let mut iterations = 0;
     let mut small_steps = 0;
     let mut taken_back = 0;
-    while iterations < stopping.max_iterations {
+    let out_of_time = || {
+        stopping
+            .deadline
+            .is_some_and(|d| std::time::Instant::now() >= d)
+    };
+    while iterations < stopping.max_iterations && !out_of_time() {
         iterations += 1;
         let Some(step) = solve_step(&g, &h, lambda) else {
             break;
@@ -166,7 +173,8 @@ pub fn minimise(
                 };
                 let last = small_steps >= 2
                     || step.norm() < stopping.step
-                    || iterations == stopping.max_iterations;
+                    || iterations == stopping.max_iterations
+                    || out_of_time();
                 // (the value in the new reference; a step no one takes needs no gradient)
                 (f, g, h) = if stands && (last || trial_gradients) {
                     evaluated
@@ -508,11 +516,38 @@ mod tests {
 
     fn stopping() -> Stopping {
         Stopping {
+            deadline: None,
             max_iterations: 100,
             decrease: 1e-12,
             step: 1e-12,
             predicted: 0.0,
         }
+    }
+
+    /// A deadline already passed takes no step: the start comes back as it was, with its
+    /// value; no deadline, the same start goes on to the centre.
+    #[test]
+    fn a_deadline_passed_takes_no_step() {
+        let start = Vector::from_element(0.1);
+        let spent = Stopping {
+            deadline: Some(std::time::Instant::now()),
+            ..stopping()
+        };
+        let stopped = minimise(
+            &mut Bowl::new(Vector::zeros(), -10.0),
+            start,
+            &nothing_held(),
+            &spent,
+        );
+        assert_eq!(stopped.iterations, 0, "{stopped:?}");
+        assert_eq!(stopped.x, start);
+        let free = minimise(
+            &mut Bowl::new(Vector::zeros(), -10.0),
+            start,
+            &nothing_held(),
+            &stopping(),
+        );
+        assert!(free.x.norm() < 1e-6, "{free:?}");
     }
 
     /// The bowl's undamped step predicts |x - centre|² / 2: a start predicting less than

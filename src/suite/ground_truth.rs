@@ -222,6 +222,7 @@ fn free_limits(options: &FitOptions) -> likelihood::Limits {
         bounds: options.bounds(),
         fixed_shape: [false; 6],
         fixed_axis: false,
+        deadline: None,
     }
 }
 

@@ -17,6 +17,8 @@ pub struct Limits {
     pub fixed_shape: [bool; 6],
     /// the hole axis is known: the rotation may only turn about it
     pub fixed_axis: bool,
+    /// no step is taken past this time ([`crate::fit::FitOptions::time_budget_ms`])
+    pub deadline: Option<std::time::Instant>,
 }
 
 impl Limits {
@@ -95,6 +97,7 @@ pub fn refine_on(
         // (candidates are ranked by their values here: each is refined on to the
         // decrease test, not stopped a standard error short)
         predicted: 0.0,
+        deadline: limits.deadline,
     };
     let minimum = minimise(&mut problem, x, &limits.held(start), &stopping);
     Refined {

@@ -181,6 +181,7 @@ fn refinement_recovers_a_noisy_section() {
         bounds: Bounds::new(1e-3, 5.0, 10.0, 0.1, 2.0),
         fixed_shape: [false; 6],
         fixed_axis: false,
+        deadline: None,
     };
     let r = refine(&data, &start, 0.02, &limits, 40);
     let s = r.candidate.shape;

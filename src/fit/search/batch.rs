@@ -116,6 +116,11 @@ fn fit_batch_searched(
             .iter()
             .map(|&(i, _)| FitOptions {
                 viewpoint: Viewpoint::None,
+                // (the refit has what is left of the budget)
+                time_budget_ms: resolved[i].0.time_budget_ms.map(|budget| {
+                    let spent = results[i].as_ref().map_or(0.0, |r| r.timing_ms.total);
+                    (budget - spent).max(1e-3)
+                }),
                 ..resolved[i].0.clone()
             })
             .collect();
@@ -151,6 +156,18 @@ fn fit_batch_searched(
     }
     Ok(results)
 }
+
+/// How `timing_ms.over_budget` names a search whose likelihood refinements the time
+/// budget cut short ([`FitOptions::time_budget_ms`]).
+pub const SEARCH_CUT_SHORT: &str = "search";
+
+/// The warning of a search the time budget cut short: its candidates were not refined to
+/// the end, and a fit that stopped early is no answer to trust unwarned (on fresh suite
+/// sets a budget of 150 ms left 5-7% of the fits wrong that were right without it,
+/// `docs/fit.md`, "A time budget").
+pub const BUDGET_CUT_WARNING: &str = "cut short by the time budget: the search's likelihood \
+     refinements stopped at the budget before they converged, so shape and pose may be off; \
+     a larger time_budget_ms, or none, lets them finish";
 
 /// Every cloud prepared, grouped by solver settings, searched and reported; `twins` are
 /// pairs of clouds that are one cloud in two readings (see [`TWIN_MARGIN`]).
@@ -243,6 +260,10 @@ fn searched_once(
                 total,
                 ..Default::default()
             };
+            if p.deadline.is_some_and(|d| Instant::now() >= d) {
+                r.timing_ms.over_budget.push(SEARCH_CUT_SHORT.into());
+                r.warnings.push(BUDGET_CUT_WARNING.into());
+            }
             results[*i] = Some(Ok(r));
         }
     }

@@ -73,6 +73,10 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitRepo
     let start = Instant::now();
     let polish_options = FitOptions {
         stage2_points: options.polish_points,
+        // (what is left of the budget bounds the polish's own steps)
+        time_budget_ms: options
+            .time_budget_ms
+            .map(|budget| (budget - fitted.timing_ms.total).max(1e-3)),
         ..(*options).clone()
     };
     let Ok(p) = prepare(cloud, &polish_options, StartSet::Usual) else {
@@ -101,6 +105,12 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitRepo
     warn_off_its_points(&mut polished, &p);
     let spent = start.elapsed().as_secs_f64() * 1e3;
     polished.timing_ms = fitted.timing_ms.clone();
+    if p.deadline.is_some_and(|d| Instant::now() >= d) {
+        polished
+            .timing_ms
+            .over_budget
+            .push(ablation::name(Stage::PolishOnMorePoints));
+    }
     polished.timing_ms.total += spent;
     polished
         .timing_ms
@@ -111,6 +121,15 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitRepo
         ..fitted.points.clone()
     };
     polished.search = fitted.search.clone();
+    // (the search's own warnings, a viewpoint dropped or a budget that cut it short, stand
+    // for the polished fit too; the others are judged on it anew)
+    let searched: Vec<String> = fitted
+        .warnings
+        .iter()
+        .filter(|w| w.starts_with(VIEWPOINT_IGNORED) || w.as_str() == batch::BUDGET_CUT_WARNING)
+        .cloned()
+        .collect();
+    polished.warnings.splice(0..0, searched);
     *result = Ok(polished);
 }
 
