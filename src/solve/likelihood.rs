@@ -98,35 +98,8 @@ pub fn minimise(
     held: &Held,
     stopping: &Stopping,
 ) -> Minimum {
-    let mut free = held.parameters.map(|h| !h);
-    // with a known axis the step is solved in parameters whose turn is theta about it
-    // alone (column 9 of the map is the axis, 10 and 11 empty)
-    let reduction = held.axis.map(|axis| {
-        let mut map = Matrix::identity();
-        for k in 9..12 {
-            map[(k, k)] = 0.0;
-        }
-        for (k, a) in axis.to_array().into_iter().enumerate() {
-            map[(9 + k, 9)] = a;
-        }
-        free[10] = false;
-        free[11] = false;
-        map
-    });
-    let solve_step = |g: &Vector, h: &Matrix, lambda: f64| -> Option<Vector> {
-        match &reduction {
-            Some(map) => {
-                let step = damped_step(
-                    &(map.transpose() * g),
-                    &(map.transpose() * h * map),
-                    lambda,
-                    &free,
-                )?;
-                Some(map * step)
-            }
-            None => damped_step(g, h, lambda, &free),
-        }
-    };
+    let steps = Steps::new(held);
+    let solve_step = |g: &Vector, h: &Matrix, lambda: f64| steps.solve(g, h, lambda);
     let trial_gradients = problem.trial_gradients();
     let (mut f, mut g, mut h) = problem.evaluate(&x, true);
     let at_minimum = |g: &Vector, h: &Matrix| {
@@ -220,6 +193,51 @@ pub fn minimise(
         x,
         value: f,
         iterations,
+    }
+}
+
+/// The damped step in the parameters that move: those not held, and with a known axis
+/// the turn about it alone.
+struct Steps {
+    free: [bool; PARAMETERS],
+    /// with a known axis, the map from the reduced parameters (whose turn is theta about
+    /// the axis: column 9 is the axis, 10 and 11 empty) to the full ones
+    reduction: Option<Matrix>,
+}
+
+impl Steps {
+    fn new(held: &Held) -> Self {
+        let mut free = held.parameters.map(|h| !h);
+        let reduction = held.axis.map(|axis| {
+            let mut map = Matrix::identity();
+            for k in 9..12 {
+                map[(k, k)] = 0.0;
+            }
+            for (k, a) in axis.to_array().into_iter().enumerate() {
+                map[(9 + k, 9)] = a;
+            }
+            free[10] = false;
+            free[11] = false;
+            map
+        });
+        Self { free, reduction }
+    }
+
+    /// The step at damping `lambda` from gradient `g` and Hessian `h`; None where the
+    /// damped system is singular.
+    fn solve(&self, g: &Vector, h: &Matrix, lambda: f64) -> Option<Vector> {
+        match &self.reduction {
+            Some(map) => {
+                let step = damped_step(
+                    &(map.transpose() * g),
+                    &(map.transpose() * h * map),
+                    lambda,
+                    &self.free,
+                )?;
+                Some(map * step)
+            }
+            None => damped_step(g, h, lambda, &self.free),
+        }
     }
 }
 
