@@ -87,6 +87,7 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitRepo
     let Some(refined) = refine_both_readings(&p, &c, sigma, POLISH_DUAL_MARGIN) else {
         return;
     };
+    let refined_by = Instant::now();
     let mut polished = report(
         &p,
         &refined.candidate,
@@ -105,7 +106,7 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitRepo
     warn_off_its_points(&mut polished, &p);
     let spent = start.elapsed().as_secs_f64() * 1e3;
     polished.timing_ms = fitted.timing_ms.clone();
-    if p.deadline.is_some_and(|d| Instant::now() >= d) {
+    if p.deadline.is_some_and(|d| refined_by >= d) {
         polished
             .timing_ms
             .over_budget
