@@ -1,5 +1,5 @@
 //! Distinct basins: which candidates of one cloud count as different answers, so that
-//! the search keeps one of each and not five of the likeliest.
+//! the candidates a round keeps are that many answers, not one answer several times.
 
 use super::*;
 
