@@ -200,7 +200,7 @@ fn answer(
 }
 
 /// [`fit_batch`] without the screen for an object.
-pub(in crate::fit) fn fit_batch_unscreened(
+fn fit_batch_unscreened(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
 ) -> Result<Vec<Result<FitReport, FitError>>, FitError> {
