@@ -110,6 +110,9 @@ fn fit_batch_searched(
             .then_some((i, violated))
         })
         .collect();
+    // (the search's own warnings, added once the polish has judged the fit: a viewpoint
+    // dropped here, a budget that cut the search short)
+    let mut search_warnings: Vec<(usize, String)> = Vec::new();
     if !contradicted.is_empty() {
         let started = Instant::now();
         let options: Vec<FitOptions> = contradicted
@@ -136,6 +139,7 @@ fn fit_batch_searched(
             let warning = viewpoint_ignored_warning(violated);
             resolved[i].0.viewpoint = Viewpoint::None;
             resolved[i].1 = resolved[i].1.dropped(&warning);
+            search_warnings.push((i, warning));
             results[i] = refit.map(|mut r| {
                 // (the fit with the viewpoint, and the wait for the others' refits)
                 let first = spent - r.timing_ms.total;
@@ -143,15 +147,26 @@ fn fit_batch_searched(
                     .stages
                     .insert(ablation::name(Stage::InconsistentViewpoint), first);
                 r.timing_ms.total = spent;
-                r.warnings.push(warning);
                 r
             });
         }
     }
     polish::polish(&with_resolved(clouds, &resolved), &mut results);
+    for (i, warning) in search_warnings {
+        if let Ok(r) = &mut results[i] {
+            r.warnings.push(warning);
+        }
+    }
     for (r, (_, used)) in results.iter_mut().zip(resolved) {
         if let Ok(r) = r {
             r.viewpoint = used;
+            if r.timing_ms
+                .over_budget
+                .iter()
+                .any(|s| s == SEARCH_CUT_SHORT)
+            {
+                r.warnings.push(BUDGET_CUT_WARNING.into());
+            }
         }
     }
     Ok(results)
@@ -264,7 +279,6 @@ fn searched_once(
             // (a search still running at its deadline was cut short there)
             if p.deadline.is_some_and(|d| searched_by >= d) {
                 r.timing_ms.over_budget.push(SEARCH_CUT_SHORT.into());
-                r.warnings.push(BUDGET_CUT_WARNING.into());
             }
             results[*i] = Some(Ok(r));
         }

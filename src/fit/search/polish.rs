@@ -122,15 +122,6 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitRepo
         ..fitted.points.clone()
     };
     polished.search = fitted.search.clone();
-    // (the search's own warnings, a viewpoint dropped or a budget that cut it short, stand
-    // for the polished fit too; the others are judged on it anew)
-    let searched: Vec<String> = fitted
-        .warnings
-        .iter()
-        .filter(|w| w.starts_with(VIEWPOINT_IGNORED) || w.as_str() == batch::BUDGET_CUT_WARNING)
-        .cloned()
-        .collect();
-    polished.warnings.splice(0..0, searched);
     *result = Ok(polished);
 }
 
