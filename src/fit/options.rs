@@ -180,6 +180,14 @@ impl Default for FitOptions {
 }
 
 impl FitOptions {
+    /// What is left of the time budget once `spent_ms` of it is gone (at least a
+    /// microsecond, so that a stage run after it is still a valid option and stops at once);
+    /// None without a budget.
+    pub(crate) fn budget_left(&self, spent_ms: f64) -> Option<f64> {
+        self.time_budget_ms
+            .map(|budget| (budget - spent_ms).max(1e-3))
+    }
+
     /// The solver's box in the normalised frame (the cloud's RMS radius is 1): sizes in
     /// [1e-3, 10], a4 up to 8, eps in [eps_min, eps_max].
     pub fn bounds(&self) -> Bounds {

@@ -120,10 +120,9 @@ fn fit_batch_searched(
             .map(|&(i, _)| FitOptions {
                 viewpoint: Viewpoint::None,
                 // (the refit has what is left of the budget)
-                time_budget_ms: resolved[i].0.time_budget_ms.map(|budget| {
-                    let spent = results[i].as_ref().map_or(0.0, |r| r.timing_ms.total);
-                    (budget - spent).max(1e-3)
-                }),
+                time_budget_ms: resolved[i]
+                    .0
+                    .budget_left(results[i].as_ref().map_or(0.0, |r| r.timing_ms.total)),
                 ..resolved[i].0.clone()
             })
             .collect();

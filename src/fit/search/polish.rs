@@ -74,9 +74,7 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitRepo
     let polish_options = FitOptions {
         stage2_points: options.polish_points,
         // (what is left of the budget bounds the polish's own steps)
-        time_budget_ms: options
-            .time_budget_ms
-            .map(|budget| (budget - fitted.timing_ms.total).max(1e-3)),
+        time_budget_ms: options.budget_left(fitted.timing_ms.total),
         ..(*options).clone()
     };
     let Ok(p) = prepare(cloud, &polish_options, StartSet::Usual) else {
