@@ -15,6 +15,9 @@ pub enum Stage {
     /// a closed body's hollow reading (the same outline around a through hole) in the
     /// search ([`super::prepare`]'s `hollowed`)
     HollowedReading,
+    /// the rings a closed fit may lie across (its outline's axes cycled around a hole) in
+    /// the search ([`super::prepare`]'s `rings_across`)
+    RingsAcross,
     /// a cloud whose viewpoint was only inferred searched as a view from nowhere too, the
     /// likelier reading kept ([`super::search::batch`])
     SettleInferredView,

@@ -550,6 +550,35 @@ impl Prepared<'_> {
         Some(hollow)
     }
 
+    /// The rings `fitted`, a closed body (a4 < 1), may be lying across
+    /// ([`starts::rings_across`]) inside their supported boxes, those the viewpoint sees
+    /// across their axis ([`search::seen_across_its_axis`]: nearer their axis it would
+    /// have seen into the hole, and the closed fit would not stand over it). None without
+    /// a viewpoint (a cloud all round a ring shows its hole), for a fit with a hole, a
+    /// superellipsoid's fit, or a fit whose axis or sizes are known (the caller has said
+    /// which way the hole goes, or how large the body is).
+    pub(super) fn rings_across(&self, fitted: &Candidate) -> Vec<Candidate> {
+        let Some(viewpoint) = self.viewpoint else {
+            return Vec::new();
+        };
+        if self.skip.contains(&Stage::RingsAcross)
+            || fitted.shape.a4 >= 1.0
+            || self.holds_a4_at_zero()
+            || self.known_axis
+            || self.known[..4].iter().any(Option::is_some)
+        {
+            return Vec::new();
+        }
+        starts::rings_across(fitted, search::HOLLOWED_A4)
+            .into_iter()
+            .filter(|ring| search::seen_across_its_axis(ring, viewpoint))
+            .map(|mut ring| {
+                ring.shape = self.supported_bounds(&ring).interior(&ring.shape);
+                ring
+            })
+            .collect()
+    }
+
     /// Whether this is a superellipsoid's fit: a4 held at 0 (`model: superellipsoid`, or
     /// `auto`'s second fit).
     pub(super) fn holds_a4_at_zero(&self) -> bool {

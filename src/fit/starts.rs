@@ -274,6 +274,17 @@ pub fn hollowed(closed: &Candidate, a4: f64) -> Candidate {
     }
 }
 
+/// The rings a closed body (a4 < 1) may be lying across: its outline
+/// ([`superellipsoid_outline`]) with its axes cycled ([`axes_cycled`]), each around a hole
+/// of a4 = `a4` ([`hollowed`]), so that each ring's extents along the world's directions
+/// are the body's. A view of an elongated or pinched ring often fits a closed slab lying
+/// across its hole (the hole axis 90 degrees off) as well by least squares, where no
+/// start near the ring's own axis survives round 1; whether the points show a hole is for
+/// the likelihood to weigh, given both readings.
+pub fn rings_across(closed: &Candidate, a4: f64) -> [Candidate; 2] {
+    axes_cycled(&superellipsoid_outline(closed)).map(|c| hollowed(&c, a4))
+}
+
 /// The superellipsoid (a4 = 0) with the outline of `free`, a free fit of the same
 /// cloud: its radii a1·(1 + a4) and a2·(1 + a4) (an apple's or a ring's outer
 /// radius), its height, exponents and pose. `model: auto`'s superellipsoid search starts
@@ -291,6 +302,52 @@ pub fn superellipsoid_outline(free: &Candidate) -> Candidate {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The rings across a closed body have its extents along the world's directions, each
+    /// with another of its axes as the hole's.
+    #[test]
+    fn the_rings_across_a_closed_body_keep_its_extents() {
+        let pose = Pose::new(
+            DQuat::from_euler(glam::EulerRot::XYZ, 0.3, -0.7, 1.1),
+            DVec3::new(0.1, -0.2, 0.3),
+        );
+        let closed = Candidate {
+            shape: Shape::new(0.4, 0.9, 0.2, 0.5, 0.7, 1.3),
+            pose,
+        };
+        // the body's half extents along its own axes, in the world
+        let extents = |c: &Candidate| {
+            let s = c.shape;
+            let grown = 1.0 + s.a4.max(0.0);
+            [
+                c.pose.rotation * DVec3::X * (s.a1 * grown),
+                c.pose.rotation * DVec3::Y * (s.a2 * grown),
+                c.pose.rotation * DVec3::Z * s.a3,
+            ]
+        };
+        let body = extents(&closed);
+        let rings = rings_across(&closed, 2.0);
+        for ring in &rings {
+            assert_eq!(ring.shape.a4, 2.0);
+            assert_eq!(ring.pose.translation, pose.translation);
+            for along in extents(ring) {
+                let same = body
+                    .iter()
+                    .any(|b| (*b - along).length() < 1e-12 || (*b + along).length() < 1e-12);
+                assert!(same, "{along:?} is none of the body's extents {body:?}");
+            }
+        }
+        let axes: Vec<DVec3> = rings.iter().map(|r| r.pose.rotation * DVec3::Z).collect();
+        let own = pose.rotation * DVec3::Z;
+        assert!(
+            axes.iter().all(|a| a.dot(own).abs() < 1e-12),
+            "a ring across has another axis"
+        );
+        assert!(
+            axes[0].dot(axes[1]).abs() < 1e-12,
+            "the two rings' axes differ"
+        );
+    }
 
     /// A closed body's hollow reading keeps its outline (outer radii, height, exponents,
     /// pose) around a hole of the a4 asked for.

@@ -17,8 +17,9 @@
 //!    sample, and where all those are closed, round 2's likeliest ring beside them (a
 //!    ring and a slab across its hole are told apart only once converged); a closed one
 //!    (no through hole) seen across its axis converges beside its hollow reading
-//!    ([`starts::hollowed`]) by the likelihood, whatever the cloud's noise; the most
-//!    likely stands, and goes on to the polish ([`polish`]).
+//!    ([`starts::hollowed`]) by the likelihood, whatever the cloud's noise, and a view
+//!    still closed beside the rings it may lie across ([`starts::rings_across`]); the
+//!    most likely stands, and goes on to the polish ([`polish`]).
 //!
 //! A cloud read both as a view from its frame's origin and as a view from nowhere is
 //! searched in both readings in the same batch; a reading plainly less likely after round 2
@@ -94,12 +95,14 @@ pub const ROBUST_FIRST_ITERATIONS: usize = 15;
 /// Iterations the first round adds for a candidate straight from round 1 (not yet
 /// converged).
 pub const ROUND1_SHORTFALL: usize = 15;
-/// The hole of a closed candidate's hollow reading ([`super::starts::hollowed`]): a hole a
-/// third of the outline's radius, for the likelihood to move from.
+/// The hole of a closed candidate's hollow reading ([`super::starts::hollowed`]) and of
+/// the rings across it ([`super::starts::rings_across`]): a hole a third of the outline's
+/// radius, for the likelihood to move from.
 pub const HOLLOWED_A4: f64 = 2.0;
 /// A closed candidate gets its hollow reading only from a view at least this far from
-/// its axis: nearer the axis the sensor sees the face a hole would open, and the points
-/// have already said whether there is one.
+/// its axis, and a ring across it only where the view is this far from the ring's axis:
+/// nearer the axis the sensor sees the face a hole would open, and the points have
+/// already said whether there is one.
 pub const HOLLOW_ACROSS_DEGREES: f64 = 60.0;
 /// A round-2 candidate within this of the best (mean log-likelihood per point) converges
 /// beside it before the choice.

@@ -395,8 +395,9 @@ fn ring_beside_closed(finalists: &[Scored], round2: &[Scored]) -> Option<Scored>
 /// where the likelihood refined it (a runner-up within [`CLOSE_MARGIN`] converges too,
 /// and the likelier of the two stands: the two readings of a top view are often that
 /// close). A closed one seen across its axis has its hollow reading converged beside it
-/// ([`hollow_finalist`]), and where every finalist is closed round 2's likeliest ring
-/// ([`ring_beside_closed`]). The polish then takes it on more of the cloud's points. With
+/// ([`reading_finalist`]), and where every finalist is closed round 2's likeliest ring
+/// ([`ring_beside_closed`]); a fit still closed then meets the rings it may lie across
+/// ([`beside_rings_across`]). The polish then takes it on more of the cloud's points. With
 /// the number of finalists converged.
 pub(super) fn finalists(
     group: &[(usize, Prepared)],
@@ -414,14 +415,15 @@ pub(super) fn finalists(
                 return (best, 0);
             }
             if !best.modelled {
-                let Some(opened) = p.hollowed(&best.candidate) else {
-                    return (best, 0);
-                };
                 let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
-                return match hollow_finalist(p, &sample, opened, best, false) {
-                    Some(hollow) => (hollow, 2),
+                let standing = match p.hollowed(&best.candidate) {
+                    Some(opened) => match reading_finalist(p, &sample, opened, best, None) {
+                        Some(hollow) => (hollow, 2),
+                        None => (best, 0),
+                    },
                     None => (best, 0),
                 };
+                return beside_rings_across(p, &sample, standing);
             }
             let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
             let close: Vec<Scored> = round2[cloud]
@@ -441,57 +443,99 @@ pub(super) fn finalists(
             let winner = converged.first().copied().unwrap_or(best);
             let hollow = p
                 .hollowed(&winner.candidate)
-                .and_then(|opened| hollow_finalist(p, &sample, opened, winner, true));
-            match hollow {
+                .and_then(|opened| reading_finalist(p, &sample, opened, winner, Some(winner)));
+            let standing = match hollow {
                 Some(hollow) => (hollow, converged.len() + 1),
                 None => (winner, converged.len()),
-            }
+            };
+            beside_rings_across(p, &sample, standing)
         })
         .collect()
 }
 
-/// `opened`, the hollow reading of a closed finalist ([`Prepared::hollowed`]), converged
-/// by the likelihood on `sample`, where it is likelier than the finalist converged the
-/// same way (`converged` says the finalist already is; a precise cloud's finalist, fitted
-/// by least squares, converges here for the comparison only). None where the hollow
-/// reading is not the likelier: a tube seen from the side shows its outside
-/// only, which least squares fits as well closed, and only the likelihood weighs whether
-/// the sensor should have seen into a hole.
-fn hollow_finalist(
+/// A cloud's fit after its finalists, `(fit, finalists converged)`, against the rings it
+/// may lie across where it is closed ([`Prepared::rings_across`]), each converged by the
+/// likelihood on `sample` ([`reading_finalist`]): the likeliest ring stands where it is
+/// likelier than the fit (a precise cloud's least-squares fit converged once for the
+/// comparison).
+fn beside_rings_across(
     p: &Prepared,
     sample: &Sample,
-    opened: Candidate,
-    finalist: Scored,
-    converged: bool,
-) -> Option<Scored> {
-    let start = Scored {
-        sigma: finalist.sigma.max(REFINE_SIGMA_FLOOR),
-        ..finalist
+    standing: (Scored, usize),
+) -> (Scored, usize) {
+    let (fit, count) = standing;
+    let rings = p.rings_across(&fit.candidate);
+    if rings.is_empty() {
+        return standing;
+    }
+    let against = if fit.modelled {
+        Some(fit)
+    } else {
+        converged_for_comparison(p, sample, fit)
     };
-    // (a refinement that collapses hands its start back, score and all: no verdict)
-    let moved = |r: Scored, from: &Candidate| (r.candidate.shape != from.shape).then_some(r);
-    let (hollow, closed) = rayon::join(
+    let Some(against) = against else {
+        return standing;
+    };
+    let tried = rings.len() + usize::from(!fit.modelled);
+    rings
+        .into_par_iter()
+        .filter_map(|ring| reading_finalist(p, sample, ring, fit, Some(against)))
+        .min_by(|a, b| a.rank(b))
+        .map_or(standing, |ring| (ring, count + tried))
+}
+
+/// `reading`, a holed reading of a closed finalist (its hollow reading,
+/// [`Prepared::hollowed`], or a ring across it, [`Prepared::rings_across`]), converged by
+/// the likelihood on `sample` from the finalist's noise, where it keeps its hole and is
+/// likelier than the finalist converged the same way (`converged`, where the caller has
+/// it: a precise cloud's finalist, fitted by least squares, converges here otherwise, for
+/// the comparison only). None where the reading is not the likelier: a tube seen from
+/// the side shows its outside only, which least squares fits as well closed, and only
+/// the likelihood weighs whether the sensor should have seen into a hole.
+fn reading_finalist(
+    p: &Prepared,
+    sample: &Sample,
+    reading: Candidate,
+    finalist: Scored,
+    converged: Option<Scored>,
+) -> Option<Scored> {
+    let (read, closed) = rayon::join(
         || {
             let from = Scored {
-                candidate: opened,
-                ..start
+                candidate: reading,
+                ..comparison_start(finalist)
             };
-            moved(converge(p, sample, from, REFINE_ITERATIONS), &opened)
+            moved(converge(p, sample, from, REFINE_ITERATIONS), &reading)
         },
-        || {
-            if converged {
-                Some(finalist)
-            } else {
-                moved(
-                    converge(p, sample, start, REFINE_ITERATIONS),
-                    &finalist.candidate,
-                )
-            }
-        },
+        || converged.or_else(|| converged_for_comparison(p, sample, finalist)),
     );
-    let (hollow, closed) = (hollow?, closed?);
-    (hollow.candidate.shape.a4 > 1.0 && hollow.rank(&closed).is_lt()).then_some(Scored {
+    let (read, closed) = (read?, closed?);
+    (read.candidate.shape.a4 > 1.0 && read.rank(&closed).is_lt()).then_some(Scored {
         modelled: true,
-        ..hollow
+        ..read
     })
+}
+
+/// A least-squares `finalist` converged by the likelihood on `sample`, to be weighed
+/// against a reading of it; None where the refinement collapses.
+fn converged_for_comparison(p: &Prepared, sample: &Sample, finalist: Scored) -> Option<Scored> {
+    let start = comparison_start(finalist);
+    moved(
+        converge(p, sample, start, REFINE_ITERATIONS),
+        &finalist.candidate,
+    )
+}
+
+/// Where a finalist and its readings start their likelihood refinement: at its noise,
+/// floored at [`REFINE_SIGMA_FLOOR`].
+fn comparison_start(finalist: Scored) -> Scored {
+    Scored {
+        sigma: finalist.sigma.max(REFINE_SIGMA_FLOOR),
+        ..finalist
+    }
+}
+
+/// A refinement that collapses hands its start back, score and all: no verdict.
+fn moved(refined: Scored, from: &Candidate) -> Option<Scored> {
+    (refined.candidate.shape != from.shape).then_some(refined)
 }
