@@ -415,15 +415,22 @@ pub(super) fn finalists(
                 return (best, 0);
             }
             if !best.modelled {
+                // (a precise cloud's least-squares fit converges by the likelihood once,
+                // for the comparison with its hollow reading and the rings across it)
+                let opened = p.hollowed(&best.candidate);
+                if opened.is_none() && p.rings_across(&best.candidate).is_empty() {
+                    return (best, 0);
+                }
                 let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
-                let standing = match p.hollowed(&best.candidate) {
-                    Some(opened) => match reading_finalist(p, &sample, opened, best, None) {
-                        Some(hollow) => (hollow, 2),
-                        None => (best, 0),
-                    },
+                let Some(converged) = converged_for_comparison(p, &sample, best) else {
+                    return (best, 0);
+                };
+                let hollow = opened.and_then(|o| reading_finalist(p, &sample, o, best, converged));
+                let standing = match hollow {
+                    Some(hollow) => (hollow, 2),
                     None => (best, 0),
                 };
-                return beside_rings_across(p, &sample, standing);
+                return beside_rings_across(p, &sample, standing, Some(converged));
             }
             let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
             let close: Vec<Scored> = round2[cloud]
@@ -443,12 +450,12 @@ pub(super) fn finalists(
             let winner = converged.first().copied().unwrap_or(best);
             let hollow = p
                 .hollowed(&winner.candidate)
-                .and_then(|opened| reading_finalist(p, &sample, opened, winner, Some(winner)));
+                .and_then(|opened| reading_finalist(p, &sample, opened, winner, winner));
             let standing = match hollow {
                 Some(hollow) => (hollow, converged.len() + 1),
                 None => (winner, converged.len()),
             };
-            beside_rings_across(p, &sample, standing)
+            beside_rings_across(p, &sample, standing, None)
         })
         .collect()
 }
@@ -456,12 +463,13 @@ pub(super) fn finalists(
 /// A cloud's fit after its finalists, `(fit, finalists converged)`, against the rings it
 /// may lie across where it is closed ([`Prepared::rings_across`]), each converged by the
 /// likelihood on `sample` ([`reading_finalist`]): the likeliest ring stands where it is
-/// likelier than the fit (a precise cloud's least-squares fit converged once for the
-/// comparison).
+/// likelier than the fit. A precise cloud's least-squares fit is weighed as `converged`
+/// by the likelihood (the caller's, where it has it).
 fn beside_rings_across(
     p: &Prepared,
     sample: &Sample,
     standing: (Scored, usize),
+    converged: Option<Scored>,
 ) -> (Scored, usize) {
     let (fit, count) = standing;
     let rings = p.rings_across(&fit.candidate);
@@ -471,7 +479,7 @@ fn beside_rings_across(
     let against = if fit.modelled {
         Some(fit)
     } else {
-        converged_for_comparison(p, sample, fit)
+        converged.or_else(|| converged_for_comparison(p, sample, fit))
     };
     let Some(against) = against else {
         return standing;
@@ -479,7 +487,7 @@ fn beside_rings_across(
     let tried = rings.len() + usize::from(!fit.modelled);
     rings
         .into_par_iter()
-        .filter_map(|ring| reading_finalist(p, sample, ring, fit, Some(against)))
+        .filter_map(|ring| reading_finalist(p, sample, ring, fit, against))
         .min_by(|a, b| a.rank(b))
         .map_or(standing, |ring| (ring, count + tried))
 }
@@ -487,30 +495,24 @@ fn beside_rings_across(
 /// `reading`, a holed reading of a closed finalist (its hollow reading,
 /// [`Prepared::hollowed`], or a ring across it, [`Prepared::rings_across`]), converged by
 /// the likelihood on `sample` from the finalist's noise, where it keeps its hole and is
-/// likelier than the finalist converged the same way (`converged`, where the caller has
-/// it: a precise cloud's finalist, fitted by least squares, converges here otherwise, for
-/// the comparison only). None where the reading is not the likelier: a tube seen from
-/// the side shows its outside only, which least squares fits as well closed, and only
-/// the likelihood weighs whether the sensor should have seen into a hole.
+/// likelier than the finalist `converged` the same way (a precise cloud's finalist,
+/// fitted by least squares, converged for the comparison only). None where the reading
+/// is not the likelier: a tube seen from the side shows its outside only, which least
+/// squares fits as well closed, and only the likelihood weighs whether the sensor should
+/// have seen into a hole.
 fn reading_finalist(
     p: &Prepared,
     sample: &Sample,
     reading: Candidate,
     finalist: Scored,
-    converged: Option<Scored>,
+    converged: Scored,
 ) -> Option<Scored> {
-    let (read, closed) = rayon::join(
-        || {
-            let from = Scored {
-                candidate: reading,
-                ..comparison_start(finalist)
-            };
-            moved(converge(p, sample, from, REFINE_ITERATIONS), &reading)
-        },
-        || converged.or_else(|| converged_for_comparison(p, sample, finalist)),
-    );
-    let (read, closed) = (read?, closed?);
-    (read.candidate.shape.a4 > 1.0 && read.rank(&closed).is_lt()).then_some(Scored {
+    let from = Scored {
+        candidate: reading,
+        ..comparison_start(finalist)
+    };
+    let read = moved(converge(p, sample, from, REFINE_ITERATIONS), &reading)?;
+    (read.candidate.shape.a4 > 1.0 && read.rank(&converged).is_lt()).then_some(Scored {
         modelled: true,
         ..read
     })
