@@ -57,11 +57,11 @@ use paper::fit_batch_paper;
 use planarity::screen_for_an_object;
 pub use prepare::{MAX_OVERREACH, overreach};
 use prepare::{Prepared, StartSet, prepare};
-use report::report;
 pub use report::{
     BackendOut, FitReport, Iterations, PointsOut, PoseOut, Quality, SearchOut, Timing,
     parse_report_json, quality,
 };
+use report::{Searched, report};
 pub use search::basins::DISTINCT_THICKNESS;
 pub use search::batch::VIEWPOINT_IGNORED;
 pub use search::estimator::{

@@ -131,6 +131,7 @@ fn fit_group(
                 stage1_iterations[cloud],
                 backend.clone(),
             )
+            .report
         })
         .collect();
     // the reports' own checks (quality, coverage) count as stage 2

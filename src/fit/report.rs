@@ -149,13 +149,17 @@ pub struct FitReport {
     pub warnings: Vec<String>,
     #[serde(skip)]
     pub fitted: (Shape, Pose),
+}
+
+/// A fit as the search hands it on to the stages after it: its report, and what those
+/// stages read of it that a caller is not given.
+pub(super) struct Searched {
+    pub report: FitReport,
     /// the fraction of the stage-2 free-space points that lie inside the fit (see
     /// [`super::free_space::violated_fraction`]); None without a viewpoint
-    #[serde(skip)]
     pub free_space_violation: Option<f64>,
     /// the noise model refined this fit at a noise that matters to it, so the polish
     /// takes it on ([`Quality::noise_sigma`] is then the model's)
-    #[serde(skip)]
     pub noise_modelled: bool,
 }
 
@@ -255,7 +259,8 @@ pub fn parse_report_json(bytes: &[u8]) -> Result<(Shape, Pose), String> {
     object.validated()
 }
 
-/// The report of one cloud's chosen solution, in world units.
+/// The report of one cloud's chosen solution, in world units, with what the stages
+/// after the search read of it.
 pub(super) fn report(
     p: &Prepared,
     candidate: &Candidate,
@@ -263,7 +268,7 @@ pub(super) fn report(
     modelled_sigma: Option<f64>,
     stage1_iterations: usize,
     backend: BackendOut,
-) -> FitReport {
+) -> Searched {
     let (shape, pose) = p.norm.to_world(candidate);
     let mut quality = quality_on(&shape, &pose, p.points, QUALITY_SAMPLE);
     // the noise model's sigma, where it ran, is the better estimate (the first-order
@@ -296,7 +301,7 @@ pub(super) fn report(
         .collect();
     let r = pose.matrix();
     let q = pose.rotation;
-    FitReport {
+    let report = FitReport {
         method: p.method,
         model: ModelOut::requested(&shape),
         shape,
@@ -331,6 +336,9 @@ pub(super) fn report(
         search: None,
         warnings,
         fitted: (shape, pose),
+    };
+    Searched {
+        report,
         free_space_violation: (!p.stage2_free.is_empty())
             .then(|| free_space::violated_fraction(candidate, &p.stage2_free)),
         noise_modelled: modelled_sigma.is_some(),

@@ -67,6 +67,54 @@ fn fit_batch_searched(
         .collect();
     let (mut results, dropped) = searched_once(evaluator, &batch, &twins)?;
     let others = results.split_off(clouds.len());
+    settle_inferred_views(
+        clouds,
+        &nowhere,
+        others,
+        &dropped,
+        &mut resolved,
+        &mut results,
+    );
+    // (the search's own warnings, added once the polish has judged the fit: a viewpoint
+    // dropped here, a budget that cut the search short)
+    let search_warnings = refit_contradicted_views(evaluator, clouds, &mut resolved, &mut results)?;
+    polish::polish(&with_resolved(clouds, &resolved), &mut results);
+    let mut reports: Vec<Result<FitReport, FitError>> = results
+        .into_iter()
+        .map(|r| r.map(|searched| searched.report))
+        .collect();
+    for (i, warning) in search_warnings {
+        if let Ok(r) = &mut reports[i] {
+            r.warnings.push(warning);
+        }
+    }
+    for (r, (_, used)) in reports.iter_mut().zip(resolved) {
+        if let Ok(r) = r {
+            r.viewpoint = used;
+            if r.timing_ms
+                .over_budget
+                .iter()
+                .any(|s| s == SEARCH_CUT_SHORT)
+            {
+                r.warnings.push(BUDGET_CUT_WARNING.into());
+            }
+        }
+    }
+    Ok(reports)
+}
+
+/// Each inferred view's fit against its other reading's, `others` (the cloud searched as
+/// a view from nowhere, `nowhere`): the reading under which its own fit is the likelier
+/// stands, in `results` and in the viewpoint `resolved`; either reading's search stopped
+/// early for its twin (`dropped`) loses.
+fn settle_inferred_views(
+    clouds: &[(&[DVec3], &FitOptions)],
+    nowhere: &[(usize, FitOptions)],
+    others: Vec<Result<Searched, FitError>>,
+    dropped: &[Option<&'static str>],
+    resolved: &mut [(FitOptions, ViewpointUsed)],
+    results: &mut [Result<Searched, FitError>],
+) {
     for (k, ((i, options), other)) in nowhere.iter().zip(others).enumerate() {
         let (Ok(view), Ok(other)) = (&results[*i], other) else {
             continue;
@@ -82,7 +130,7 @@ fn fit_batch_searched(
         let all_round = match (view_stopped, other_stopped) {
             (Some(_), _) => true,
             (_, Some(_)) => false,
-            _ => test.score(&other, false) < test.score(view, true),
+            _ => test.score(&other.report, false) < test.score(&view.report, true),
         };
         let went_to = if all_round {
             resolved[*i].0.viewpoint = Viewpoint::None;
@@ -93,12 +141,22 @@ fn fit_batch_searched(
             other_stopped
         };
         if let Ok(taken) = &mut results[*i]
-            && let Some(search) = &mut taken.search
+            && let Some(search) = &mut taken.report.search
         {
             search.other_reading_went_to = Some(went_to.unwrap_or("finalists").into());
         }
     }
-    // a given viewpoint the fit contradicts goes: those clouds again without it
+}
+
+/// The clouds whose given viewpoint their fit contradicts (more of its free-space
+/// points inside the fit than [`free_space::MAX_VIOLATED_FRACTION`]) searched again
+/// without it, in `results` and in `resolved`; with the warning each is to carry.
+fn refit_contradicted_views(
+    evaluator: &mut dyn Evaluator,
+    clouds: &[(&[DVec3], &FitOptions)],
+    resolved: &mut [(FitOptions, ViewpointUsed)],
+    results: &mut [Result<Searched, FitError>],
+) -> Result<Vec<(usize, String)>, FitError> {
     let contradicted: Vec<(usize, f64)> = results
         .iter()
         .enumerate()
@@ -110,65 +168,47 @@ fn fit_batch_searched(
             .then_some((i, violated))
         })
         .collect();
-    // (the search's own warnings, added once the polish has judged the fit: a viewpoint
-    // dropped here, a budget that cut the search short)
-    let mut search_warnings: Vec<(usize, String)> = Vec::new();
-    if !contradicted.is_empty() {
-        let started = Instant::now();
-        let options: Vec<FitOptions> = contradicted
-            .iter()
-            .map(|&(i, _)| FitOptions {
-                viewpoint: Viewpoint::None,
-                // (the refit has what is left of the budget)
-                time_budget_ms: resolved[i]
-                    .0
-                    .budget_left(results[i].as_ref().map_or(0.0, |r| r.timing_ms.total)),
-                ..resolved[i].0.clone()
-            })
-            .collect();
-        let batch: Vec<(&[DVec3], &FitOptions)> = contradicted
-            .iter()
-            .zip(&options)
-            .map(|(&(i, _), o)| (clouds[i].0, o))
-            .collect();
-        let (refits, _) = searched_once(evaluator, &batch, &[])?;
-        let waited = started.elapsed().as_secs_f64() * 1e3;
-        for (&(i, violated), refit) in contradicted.iter().zip(refits) {
-            let spent = results[i].as_ref().map_or(0.0, |r| r.timing_ms.total) + waited;
-            let warning = viewpoint_ignored_warning(violated);
-            resolved[i].0.viewpoint = Viewpoint::None;
-            resolved[i].1 = resolved[i].1.dropped(&warning);
-            search_warnings.push((i, warning));
-            results[i] = refit.map(|mut r| {
-                // (the fit with the viewpoint, and the wait for the others' refits)
-                let first = spent - r.timing_ms.total;
-                r.timing_ms
-                    .stages
-                    .insert(ablation::name(Stage::InconsistentViewpoint), first);
-                r.timing_ms.total = spent;
-                r
-            });
-        }
+    if contradicted.is_empty() {
+        return Ok(Vec::new());
     }
-    polish::polish(&with_resolved(clouds, &resolved), &mut results);
-    for (i, warning) in search_warnings {
-        if let Ok(r) = &mut results[i] {
-            r.warnings.push(warning);
-        }
+    let total =
+        |r: &Result<Searched, FitError>| r.as_ref().map_or(0.0, |r| r.report.timing_ms.total);
+    let started = Instant::now();
+    let options: Vec<FitOptions> = contradicted
+        .iter()
+        .map(|&(i, _)| FitOptions {
+            viewpoint: Viewpoint::None,
+            // (the refit has what is left of the budget)
+            time_budget_ms: resolved[i].0.budget_left(total(&results[i])),
+            ..resolved[i].0.clone()
+        })
+        .collect();
+    let batch: Vec<(&[DVec3], &FitOptions)> = contradicted
+        .iter()
+        .zip(&options)
+        .map(|(&(i, _), o)| (clouds[i].0, o))
+        .collect();
+    let (refits, _) = searched_once(evaluator, &batch, &[])?;
+    let waited = started.elapsed().as_secs_f64() * 1e3;
+    let mut warnings = Vec::new();
+    for (&(i, violated), refit) in contradicted.iter().zip(refits) {
+        let spent = total(&results[i]) + waited;
+        let warning = viewpoint_ignored_warning(violated);
+        resolved[i].0.viewpoint = Viewpoint::None;
+        resolved[i].1 = resolved[i].1.dropped(&warning);
+        warnings.push((i, warning));
+        results[i] = refit.map(|mut r| {
+            // (the fit with the viewpoint, and the wait for the others' refits)
+            let timing = &mut r.report.timing_ms;
+            let first = spent - timing.total;
+            timing
+                .stages
+                .insert(ablation::name(Stage::InconsistentViewpoint), first);
+            timing.total = spent;
+            r
+        });
     }
-    for (r, (_, used)) in results.iter_mut().zip(resolved) {
-        if let Ok(r) = r {
-            r.viewpoint = used;
-            if r.timing_ms
-                .over_budget
-                .iter()
-                .any(|s| s == SEARCH_CUT_SHORT)
-            {
-                r.warnings.push(BUDGET_CUT_WARNING.into());
-            }
-        }
-    }
-    Ok(results)
+    Ok(warnings)
 }
 
 /// How `timing_ms.over_budget` names a search whose likelihood refinements the time
@@ -192,10 +232,10 @@ fn searched_once(
     evaluator: &mut dyn Evaluator,
     clouds: &[(&[DVec3], &FitOptions)],
     twins: &[(usize, usize)],
-) -> Result<(Vec<Result<FitReport, FitError>>, Vec<Option<&'static str>>), FitError> {
+) -> Result<(Vec<Result<Searched, FitError>>, Vec<Option<&'static str>>), FitError> {
     let mut dropped = vec![None; clouds.len()];
     let start = Instant::now();
-    let mut results: Vec<Option<Result<FitReport, FitError>>> =
+    let mut results: Vec<Option<Result<Searched, FitError>>> =
         (0..clouds.len()).map(|_| None).collect();
     let mut groups: Vec<Vec<(usize, Prepared)>> = Vec::new();
     for (i, (points, o)) in clouds.iter().enumerate() {
@@ -263,12 +303,12 @@ fn searched_once(
             // (a fit the likelihood refined to a noise too small for the model to matter
             // is a precise one: the polish passes it by)
             r.noise_modelled = best.modelled && noisy(p, &best.candidate, best.sigma);
-            polish::warn_off_its_points(&mut r, p);
-            r.search = Some(f.tried);
+            polish::warn_off_its_points(&mut r.report, p);
+            r.report.search = Some(f.tried);
             // (and the reports' own checks as stage 2, so that the parts make the total)
             let total = start.elapsed().as_secs_f64() * 1e3;
             let stage1 = searched_at + f.round1_ms;
-            r.timing_ms = Timing {
+            r.report.timing_ms = Timing {
                 stage1,
                 stage2: total - stage1,
                 noise_model: f.finalists_ms,
@@ -277,7 +317,7 @@ fn searched_once(
             };
             // (a search still running at its deadline was cut short there)
             if p.deadline.is_some_and(|d| searched_by >= d) {
-                r.timing_ms.over_budget.push(SEARCH_CUT_SHORT.into());
+                r.report.timing_ms.over_budget.push(SEARCH_CUT_SHORT.into());
             }
             results[*i] = Some(Ok(r));
         }
@@ -354,7 +394,8 @@ mod tests {
         let clouds: Vec<(&[DVec3], &FitOptions)> =
             options.iter().map(|o| (points.as_slice(), o)).collect();
         let (results, _) = searched_once(&mut CpuEvaluator::new(), &clouds, &[]).unwrap();
-        let search = |r: &Result<FitReport, FitError>| r.as_ref().unwrap().search.clone().unwrap();
+        let search =
+            |r: &Result<Searched, FitError>| r.as_ref().unwrap().report.search.clone().unwrap();
         (search(&results[0]), search(&results[1]))
     }
 

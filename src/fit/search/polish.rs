@@ -40,7 +40,7 @@ const DUAL_FIRST_ITERATIONS: usize = 5;
 /// its own, so a cloud's fit is the same alone or in a batch.
 pub(super) fn polish(
     clouds: &[(&[DVec3], &FitOptions)],
-    results: &mut [Result<FitReport, FitError>],
+    results: &mut [Result<Searched, FitError>],
 ) {
     results
         .par_iter_mut()
@@ -49,25 +49,25 @@ pub(super) fn polish(
 }
 
 /// [`polish`] of one cloud's fit.
-fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitReport, FitError>) {
-    let Ok(fitted) = result.as_ref() else {
+fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<Searched, FitError>) {
+    let Ok(searched) = result.as_mut() else {
         return;
     };
-    if !fitted.noise_modelled
+    if !searched.noise_modelled
         || options.polish_points == 0
         || options.skip.contains(&Stage::PolishOnMorePoints)
     {
         return;
     }
+    let fitted = &mut searched.report;
     if options
         .time_budget_ms
         .is_some_and(|budget| fitted.timing_ms.total > budget)
     {
-        if let Ok(r) = result.as_mut() {
-            r.timing_ms
-                .over_budget
-                .push(ablation::name(Stage::PolishOnMorePoints));
-        }
+        fitted
+            .timing_ms
+            .over_budget
+            .push(ablation::name(Stage::PolishOnMorePoints));
         return;
     }
     let start = Instant::now();
@@ -94,33 +94,35 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<FitRepo
         fitted.iterations.stage1,
         fitted.backend.clone(),
     );
-    let keeps_free_space = |r: &FitReport| {
+    let keeps_free_space = |r: &Searched| {
         r.free_space_violation
             .is_none_or(|v| v <= free_space::MAX_VIOLATED_FRACTION)
     };
-    if keeps_free_space(fitted) && !keeps_free_space(&polished) {
+    if keeps_free_space(searched) && !keeps_free_space(&polished) {
         return;
     }
-    warn_off_its_points(&mut polished, &p);
+    let fitted = &searched.report;
+    let report = &mut polished.report;
+    warn_off_its_points(report, &p);
     let spent = start.elapsed().as_secs_f64() * 1e3;
-    polished.timing_ms = fitted.timing_ms.clone();
+    report.timing_ms = fitted.timing_ms.clone();
     if p.deadline.is_some_and(|d| refined_by >= d) {
-        polished
+        report
             .timing_ms
             .over_budget
             .push(ablation::name(Stage::PolishOnMorePoints));
     }
-    polished.timing_ms.total += spent;
-    polished
+    report.timing_ms.total += spent;
+    report
         .timing_ms
         .stages
         .insert(ablation::name(Stage::PolishOnMorePoints), spent);
-    polished.points = PointsOut {
+    report.points = PointsOut {
         polish: Some(p.stage2_pts.len()),
         ..fitted.points.clone()
     };
-    polished.search = fitted.search.clone();
-    *result = Ok(polished);
+    report.search = fitted.search.clone();
+    *searched = polished;
 }
 
 /// The noise model's maximum-likelihood fit from `c` at noise `sigma` (normalised units)
