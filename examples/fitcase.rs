@@ -2,6 +2,7 @@
 //! with GIVEN set, the camera's position given) and print truth, fit, errors and timing;
 //! with PAPER set, by `Method::Paper`; with TRUTH set, the likelihood of the fit against the truth refined;
 //! with AXIS set, the true hole axis in the cloud's frame (to set beside the search's candidates).
+//! with SKIP=stage,... set, without those optional stages (as `bench synthetic --skip`).
 use supertoroid::bench::synthetic::{Presentation, category, presented};
 use supertoroid::eval::{CpuEvaluator, Normalization};
 use supertoroid::fit::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, fit, likelihood, objective};
@@ -24,10 +25,21 @@ fn main() {
         } else {
             Default::default()
         };
+        // SKIP=stage,...: leave those optional stages out (as `bench synthetic --skip`)
+        let skip = std::env::var("SKIP").map_or_else(
+            |_| Vec::new(),
+            |s| {
+                use clap::ValueEnum;
+                s.split(',')
+                    .map(|n| supertoroid::fit::ablation::Stage::from_str(n, true).unwrap())
+                    .collect()
+            },
+        );
         let options = FitOptions {
             seed,
             viewpoint,
             method,
+            skip,
             ..Default::default()
         };
         let r = fit(&mut CpuEvaluator::new(), &points, &options).unwrap();
@@ -35,7 +47,7 @@ fn main() {
         let pose = Pose::new(back.rotation * f.rotation, back.to_world(f.translation));
         let e = compare((&case.shape, &case.pose), (&r.fitted.0, &pose));
         println!(
-            "{seed} {} noise {noise} out {outliers}: success {} c {:.3} ax {:.2} sz {:.3} a4 {:.3} eps {:.3}\n  truth {:.4?}\n  fit   {:.4?}\n  viewpoint {:?}; {:.0} ms {:?} warnings {}",
+            "{seed} {} noise {noise} out {outliers}: success {} c {:.3} ax {:.2} sz {:.3} a4 {:.3} eps {:.3}\n  truth {:.4?}\n  fit   {:.4?}\n  viewpoint {:?}; {:.0} ms {:?} warnings {}; points {:?}",
             if partial { "partial" } else { "full" },
             e.success(),
             e.centre,
@@ -48,7 +60,8 @@ fn main() {
             r.viewpoint.source,
             r.timing_ms.total,
             r.timing_ms,
-            r.warnings.len()
+            r.warnings.len(),
+            r.points
         );
         if std::env::var("AXIS").is_ok() {
             println!(
