@@ -47,7 +47,7 @@ fn main() {
         let pose = Pose::new(back.rotation * f.rotation, back.to_world(f.translation));
         let e = compare((&case.shape, &case.pose), (&r.fitted.0, &pose));
         println!(
-            "{seed} {} noise {noise} out {outliers}: success {} c {:.3} ax {:.2} sz {:.3} a4 {:.3} eps {:.3}\n  truth {:.4?}\n  fit   {:.4?}\n  viewpoint {:?}; {:.0} ms {:?} warnings {}; points {:?}",
+            "{seed} {} noise {noise} out {outliers}: success {} c {:.3} ax {:.2} sz {:.3} a4 {:.3} eps {:.3}\n  truth {:.4?}\n  fit   {:.4?}\n  viewpoint {:?}; {:.0} ms {:?} warnings {}; points {:?}; search {:?}",
             if partial { "partial" } else { "full" },
             e.success(),
             e.centre,
@@ -61,7 +61,8 @@ fn main() {
             r.timing_ms.total,
             r.timing_ms,
             r.warnings.len(),
-            r.points
+            r.points,
+            r.search
         );
         if std::env::var("AXIS").is_ok() {
             println!(

@@ -498,3 +498,43 @@ fn bench_models_judges_the_choice_between_supertoroid_and_superellipsoid() {
     let md = std::fs::read_to_string(out.join("models.md")).unwrap();
     assert!(md.contains("Warnings: "), "{md}");
 }
+
+#[test]
+fn bench_broad_judges_each_view_and_places_each_miss() {
+    let out = out_dir("broad");
+    let v = bench(
+        &[
+            "broad",
+            "--cases",
+            "2",
+            "--seed",
+            "2000003",
+            "--backend",
+            "cpu",
+        ],
+        &out,
+        "broad",
+    );
+    let cases = v["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 2);
+    // seed % 4 is the family: an oval ring, then the suite's own ranges
+    assert_eq!(cases[0]["family"], "oval rings");
+    assert_eq!(cases[1]["family"], "suite ranges");
+    for c in cases {
+        has(
+            c,
+            &["seed", "success", "uncertainty", "t_total_ms", "warnings"],
+        );
+        // a miss, and only a miss, is placed: the search's, the estimator's or unscored
+        let placed = c["miss"].as_str();
+        assert_eq!(placed.is_some(), c["success"] == false, "{c}");
+        assert!(
+            placed.is_none_or(|m| ["search", "estimator", "unscored"].contains(&m)),
+            "{c}"
+        );
+    }
+    let csv = std::fs::read_to_string(out.join("broad.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    let md = std::fs::read_to_string(out.join("broad.md")).unwrap();
+    assert!(md.contains("| all | ") && md.contains("Misses: "), "{md}");
+}

@@ -2240,7 +2240,7 @@ fn a_free_fit_a_hair_likelier_does_not_make_a_box_an_apple() {
 /// The broadened suite's CI subset (`suite::broad`): twelve views, three of each family
 /// (the suite's ranges, tall rolls, thin washers, oval rings) through the D435-like
 /// sensor, half with outliers over the scene's box, fitted with no options in the
-/// camera's frame. `examples/broad_views` runs the full benchmark, where the fit gets
+/// camera's frame. `supertoroid bench broad` runs the full benchmark, where the fit gets
 /// about four views in five (seeds 2000000, 2100000, 2900000 and 3000000); these twelve
 /// give 8 (6 with the estimator judged on the likeliest candidate alone, which reads a
 /// thin washer's blurred section as a thick precise one), and the solver's basin choices

@@ -1,11 +1,13 @@
 //! The benchmark harness behind `supertoroid bench`: the paper's table on real clouds
 //! ([`paper`]), the ground-truth suite ([`synthetic`]) and evaluator scaling
 //! ([`scaling`]), grasps planned on fits checked on the truth ([`grasps`]), and the choice between
-//! supertoroid and superellipsoid ([`models`]), and whole table-top scenes ([`scenes`]). Every sub-bench returns a serialisable report and writes it as JSON and
+//! supertoroid and superellipsoid ([`models`]), single views beyond the suite through a depth
+//! sensor ([`broad`]), and whole table-top scenes ([`scenes`]). Every sub-bench returns a serialisable report and writes it as JSON and
 //! CSV (for machines) and markdown (for people), with the machine and git revision.
 
 pub mod ablation;
 pub mod boxes;
+pub mod broad;
 pub mod grasps;
 pub mod models;
 pub mod paper;

@@ -111,24 +111,24 @@ pub struct BenchArgs {
     /// directory for `<name>.json`, `<name>.csv` and `<name>.md`
     #[arg(long, global = true, default_value = "bench-results")]
     pub out: PathBuf,
-    /// evaluator for the fits (paper, synthetic): auto, gpu, cpu
+    /// evaluator for the fits (paper, synthetic, broad): auto, gpu, cpu
     #[arg(long, global = true, value_enum)]
     pub backend: Option<Backend>,
     /// draw pictures (paper: each cloud with its seed-0 fit; synthetic: up to six failed
     /// cases) into DIR, relative to --out unless absolute; the report embeds them
     #[arg(long, global = true)]
     pub render: Option<PathBuf>,
-    /// pipeline for the fits (paper, synthetic): default (the search) or paper
+    /// pipeline for the fits (paper, synthetic, broad): default (the search) or paper
     #[arg(long, global = true, value_enum, default_value = "default")]
     pub method: crate::fit::Method,
     /// model of the fits: as `fit --model` (default: as `fit`; auto for `models`, `scenes`
     /// and `boxes`)
     #[arg(long, global = true, value_enum)]
     pub model: Option<crate::fit::Model>,
-    /// the fits' time budget in milliseconds (paper, synthetic; see `fit --time-budget-ms`)
+    /// the fits' time budget in milliseconds (paper, synthetic, broad; see `fit --time-budget-ms`)
     #[arg(long, global = true)]
     pub time_budget_ms: Option<f64>,
-    /// leave these optional stages of the fit out (paper, synthetic), comma-separated:
+    /// leave these optional stages of the fit out (paper, synthetic, broad), comma-separated:
     /// for ablations, each stage's gain against its time
     #[arg(long, global = true, value_enum, value_delimiter = ',')]
     pub skip: Vec<crate::fit::ablation::Stage>,
@@ -190,6 +190,15 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 180)]
         cases: usize,
         #[arg(long, default_value_t = crate::bench::synthetic::DEFAULT_SEED)]
+        seed: u64,
+    },
+    /// Single views beyond the suite (its ranges, tall rolls, thin washers, oval rings)
+    /// through a D435-like sensor, as users post them: success per family, warnings, and
+    /// whose each miss is (the search's or the estimator's).
+    Broad {
+        #[arg(long, default_value_t = 80)]
+        cases: usize,
+        #[arg(long, default_value_t = 2_000_000)]
         seed: u64,
     },
     /// Model choice on a mixed suite: half supertoroids with a hole, half
@@ -742,6 +751,11 @@ fn bench(args: BenchArgs) -> Result<(), Failure> {
         }
         BenchCommand::Grasps { cases, seed } => {
             let r = crate::bench::grasps::run(*cases, *seed, backend).map_err(Failure::input)?;
+            write(&|d| write_report(d, &r), r.markdown())
+        }
+        BenchCommand::Broad { cases, seed } => {
+            let r = crate::bench::broad::run(*cases, *seed, backend, &options)
+                .map_err(Failure::input)?;
             write(&|d| write_report(d, &r), r.markdown())
         }
         BenchCommand::Models { cases, seed } => {
