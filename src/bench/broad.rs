@@ -76,64 +76,69 @@ pub fn run(
     let bar = super::progress(cases as u64, "broadened views");
     let mut out = Vec::with_capacity(cases);
     for case_seed in seed..seed + cases as u64 {
-        let case = view(case_seed);
         let options = FitOptions {
             seed: case_seed,
             ..base.clone()
         };
-        let family = FAMILIES[(case_seed % 4) as usize];
-        let report = match fit(evaluator.as_mut(), &case.points, &options) {
-            Ok(report) => report,
-            Err(FitError::NoObject(_)) => {
-                out.push(BroadCase::refused(case_seed, family));
-                bar.inc(1);
-                continue;
-            }
-            Err(e) => return Err(format!("case {case_seed}: {e}")),
-        };
-        let (shape, pose) = &report.fitted;
-        let success = compare((&case.shape, &case.pose), (shape, pose)).success();
-        let median = report.quality.median_distance;
-        let (miss, estimator_misses_too) = if success {
-            (None, false)
-        } else {
-            let from_truth = model_from_truth(&case, TruthPoints::All, true, &options);
-            let gap = basin_gap(&case, (shape, pose), report.quality.noise_sigma, &options);
-            let miss = match gap {
-                Some(g) if g > BASIN_GAP => Miss::Search,
-                Some(_) => Miss::Estimator,
-                None => Miss::Unscored,
-            };
-            (Some(miss), !from_truth.is_some_and(|e| e.success()))
-        };
-        out.push(BroadCase {
-            seed: case_seed,
-            family,
-            refused: false,
-            success,
-            warnings: report
-                .warnings
-                .iter()
-                .map(|w| w.split(':').next().unwrap_or_default().to_owned())
-                .collect(),
-            uncertainty: report
-                .quality
-                .standard_errors
-                .as_ref()
-                .map_or(f64::NAN, |e| e.share_of_tolerance()),
-            median_over_size: median / shape.size(),
-            median_over_scatter: scatter::local_scatter(&case.points)
-                .map_or(f64::NAN, |s| median / s),
-            t_total_ms: report.timing_ms.total,
-            miss,
-            estimator_misses_too,
-        });
+        out.push(judged_view(evaluator.as_mut(), case_seed, &options)?);
         bar.inc(1);
     }
     bar.finish_and_clear();
     Ok(BroadReport {
         machine: super::Machine::probe(),
         cases: out,
+    })
+}
+
+/// View `seed` fitted with `options` and judged against its truth: a view the object
+/// screen refuses is a failed case, any other error stops the run.
+fn judged_view(
+    evaluator: &mut dyn crate::eval::Evaluator,
+    seed: u64,
+    options: &FitOptions,
+) -> Result<BroadCase, String> {
+    let case = view(seed);
+    let family = FAMILIES[(seed % 4) as usize];
+    let report = match fit(evaluator, &case.points, options) {
+        Ok(report) => report,
+        Err(FitError::NoObject(_)) => return Ok(BroadCase::refused(seed, family)),
+        Err(e) => return Err(format!("case {seed}: {e}")),
+    };
+    let (shape, pose) = &report.fitted;
+    let success = compare((&case.shape, &case.pose), (shape, pose)).success();
+    let median = report.quality.median_distance;
+    let (miss, estimator_misses_too) = if success {
+        (None, false)
+    } else {
+        let from_truth = model_from_truth(&case, TruthPoints::All, true, options);
+        let gap = basin_gap(&case, (shape, pose), report.quality.noise_sigma, options);
+        let miss = match gap {
+            Some(g) if g > BASIN_GAP => Miss::Search,
+            Some(_) => Miss::Estimator,
+            None => Miss::Unscored,
+        };
+        (Some(miss), !from_truth.is_some_and(|e| e.success()))
+    };
+    Ok(BroadCase {
+        seed,
+        family,
+        refused: false,
+        success,
+        warnings: report
+            .warnings
+            .iter()
+            .map(|w| w.split(':').next().unwrap_or_default().to_owned())
+            .collect(),
+        uncertainty: report
+            .quality
+            .standard_errors
+            .as_ref()
+            .map_or(f64::NAN, |e| e.share_of_tolerance()),
+        median_over_size: median / shape.size(),
+        median_over_scatter: scatter::local_scatter(&case.points).map_or(f64::NAN, |s| median / s),
+        t_total_ms: report.timing_ms.total,
+        miss,
+        estimator_misses_too,
     })
 }
 

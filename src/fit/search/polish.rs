@@ -59,17 +59,18 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<Searche
     {
         return;
     }
-    let fitted = &mut searched.report;
     if options
         .time_budget_ms
-        .is_some_and(|budget| fitted.timing_ms.total > budget)
+        .is_some_and(|budget| searched.report.timing_ms.total > budget)
     {
-        fitted
+        searched
+            .report
             .timing_ms
             .over_budget
             .push(ablation::name(Stage::PolishOnMorePoints));
         return;
     }
+    let fitted = &searched.report;
     let start = Instant::now();
     let polish_options = FitOptions {
         stage2_points: options.polish_points,
@@ -101,7 +102,6 @@ fn polish_one(cloud: &[DVec3], options: &FitOptions, result: &mut Result<Searche
     if keeps_free_space(searched) && !keeps_free_space(&polished) {
         return;
     }
-    let fitted = &searched.report;
     let report = &mut polished.report;
     warn_off_its_points(report, &p);
     let spent = start.elapsed().as_secs_f64() * 1e3;
