@@ -525,6 +525,9 @@ fn bench_broad_judges_each_view_and_places_each_miss() {
             c,
             &["seed", "success", "uncertainty", "t_total_ms", "warnings"],
         );
+        // what an efficient estimator of the view would get right: a share
+        let attainable = c["attainable"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&attainable), "{c}");
         // a miss, and only a miss, is placed: the search's, the estimator's or unscored
         let placed = c["miss"].as_str();
         assert_eq!(placed.is_some(), c["success"] == false, "{c}");
@@ -537,4 +540,5 @@ fn bench_broad_judges_each_view_and_places_each_miss() {
     assert_eq!(csv.lines().count(), 3, "{csv}");
     let md = std::fs::read_to_string(out.join("broad.md")).unwrap();
     assert!(md.contains("| all | ") && md.contains("Misses: "), "{md}");
+    assert!(md.contains("What the views allow"), "{md}");
 }

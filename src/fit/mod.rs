@@ -58,7 +58,7 @@ use planarity::screen_for_an_object;
 pub use prepare::{MAX_OVERREACH, overreach};
 use prepare::{Prepared, StartSet, prepare};
 pub use report::{
-    BackendOut, FitReport, Iterations, PointsOut, PoseOut, Quality, SearchOut, Timing,
+    BackendOut, FitReport, Iterations, PointsOut, PoseOut, Quality, SearchOut, Timing, noise_sigma,
     parse_report_json, quality,
 };
 use report::{Searched, report};
