@@ -550,6 +550,19 @@ impl Prepared<'_> {
         Some(hollow)
     }
 
+    /// `hollow`, a hollow reading ([`Prepared::hollowed`]) that stood against its closed
+    /// fit, around a hole [`search::NARROWER_HOLE`] as wide ([`starts::hollowed`] with
+    /// the outline kept), inside its supported box; none where it has no hole.
+    pub(super) fn narrowed(&self, hollow: &Candidate) -> Option<Candidate> {
+        if hollow.shape.a4 <= 1.0 {
+            return None;
+        }
+        let a4 = 1.0 + search::NARROWER_HOLE * (hollow.shape.a4 - 1.0);
+        let mut narrower = starts::hollowed(hollow, a4);
+        narrower.shape = self.supported_bounds(&narrower).interior(&narrower.shape);
+        Some(narrower)
+    }
+
     /// The rings `fitted`, a closed body (a4 < 1), may be lying across
     /// ([`starts::rings_across`]) inside their supported boxes, those the viewpoint sees
     /// across their axis ([`search::seen_across_its_axis`]: nearer their axis it would

@@ -99,6 +99,16 @@ pub const ROUND1_SHORTFALL: usize = 15;
 /// the rings across it ([`super::starts::rings_across`]): a hole a third of the outline's
 /// radius, for the likelihood to move from.
 pub const HOLLOWED_A4: f64 = 2.0;
+/// The hole of a noisy cloud's hollow reading, converged and standing, tried once more
+/// around a hole this share as wide (its radius a1·(a4 - 1), the outline kept;
+/// [`super::prepare`]'s `narrowed`). From the side the sensor meets the wall's split
+/// into hole and section only at the rims, where the likelihood has optima of its own,
+/// and the hollow reading, started at [`HOLLOWED_A4`], stayed at walls too thin (its
+/// holes 1.2-1.6 times too wide on tall rolls). Chosen on the broadened views
+/// 4610000-4640000, where it turned 4 fits right; on the fresh 4650000-4670000 +2 / -0
+/// (`docs/fit.md`). Tried on every noisy holed fit seen from the side it lost 3 of those
+/// 240: a ring that was not hollowed is not to be narrowed.
+pub const NARROWER_HOLE: f64 = 0.5;
 /// A closed candidate gets its hollow reading only from a view at least this far from
 /// its axis, and a ring across it only where the view is this far from the ring's axis:
 /// nearer the axis the sensor sees the face a hole would open, and the points have
