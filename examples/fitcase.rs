@@ -2,7 +2,8 @@
 //! with GIVEN set, the camera's position given) and print truth, fit, errors and timing;
 //! with PAPER set, by `Method::Paper`; with TRUTH set, the likelihood of the fit against the truth refined;
 //! with AXIS set, the true hole axis in the cloud's frame (to set beside the search's candidates).
-//! with SKIP=stage,... set, without those optional stages (as `bench synthetic --skip`).
+//! with SKIP=stage,... set, without those optional stages (as `bench synthetic --skip`);
+//! with BROAD set, the seeds are views of the broadened suite (`bench broad`).
 use supertoroid::bench::synthetic::{Presentation, category, presented};
 use supertoroid::eval::{CpuEvaluator, Normalization};
 use supertoroid::fit::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, fit, likelihood, objective};
@@ -17,9 +18,18 @@ fn main() {
         Presentation::Camera
     };
     for seed in std::env::args().skip(1).map(|s| s.parse::<u64>().unwrap()) {
-        let (partial, noise, outliers) = category((seed % 1000) as usize % 180);
-        let case = make_case(seed, partial, noise, outliers);
-        let (points, viewpoint, back) = presented(&case, presentation);
+        // BROAD: a view of the broadened suite, already in its camera's frame
+        let (case, (points, viewpoint, back)) = if std::env::var("BROAD").is_ok() {
+            let case = supertoroid::suite::broad::view(seed);
+            let points = case.points.clone();
+            (case, (points, Default::default(), Pose::default()))
+        } else {
+            let (partial, noise, outliers) = category((seed % 1000) as usize % 180);
+            let case = make_case(seed, partial, noise, outliers);
+            let presented = presented(&case, presentation);
+            (case, presented)
+        };
+        let (partial, noise, outliers) = (case.partial, case.noise, case.outlier_fraction);
         let method = if std::env::var("PAPER").is_ok() {
             supertoroid::fit::Method::Paper
         } else {

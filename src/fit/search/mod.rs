@@ -106,8 +106,9 @@ pub const HOLLOWED_A4: f64 = 2.0;
 /// and the hollow reading, started at [`HOLLOWED_A4`], stayed at walls too thin (its
 /// holes 1.2-1.6 times too wide on tall rolls). Chosen on the broadened views
 /// 4610000-4640000, where it turned 4 fits right; on the fresh 4650000-4670000 +2 / -0
-/// (`docs/fit.md`). Tried on every noisy holed fit seen from the side it lost 3 of those
-/// 240: a ring that was not hollowed is not to be narrowed.
+/// (`docs/fit.md`). Only a hollow reading is narrowed: a ring the search found holed
+/// keeps its wall (narrowing every noisy holed fit seen from the side turned 3 right
+/// fits of those 240 wrong).
 pub const NARROWER_HOLE: f64 = 0.5;
 /// A closed candidate gets its hollow reading only from a view at least this far from
 /// its axis, and a ring across it only where the view is this far from the ring's axis:
