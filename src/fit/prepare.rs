@@ -551,16 +551,13 @@ impl Prepared<'_> {
     }
 
     /// `hollow`, a hollow reading ([`Prepared::hollowed`]) that stood against its closed
-    /// fit, around a hole [`search::NARROWER_HOLE`] as wide ([`starts::hollowed`] with
-    /// the outline kept), inside its supported box; none where it has no hole.
-    pub(super) fn narrowed(&self, hollow: &Candidate) -> Option<Candidate> {
-        if hollow.shape.a4 <= 1.0 {
-            return None;
-        }
+    /// fit (so with a hole, a4 > 1), around a hole [`search::NARROWER_HOLE`] as wide
+    /// ([`starts::hollowed`] with the outline kept), inside its supported box.
+    pub(super) fn narrowed(&self, hollow: &Candidate) -> Candidate {
         let a4 = 1.0 + search::NARROWER_HOLE * (hollow.shape.a4 - 1.0);
         let mut narrower = starts::hollowed(hollow, a4);
         narrower.shape = self.supported_bounds(&narrower).interior(&narrower.shape);
-        Some(narrower)
+        narrower
     }
 
     /// The rings `fitted`, a closed body (a4 < 1), may be lying across

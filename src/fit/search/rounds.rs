@@ -453,7 +453,8 @@ pub(super) fn finalists(
                 .and_then(|opened| reading_finalist(p, &sample, opened, winner, winner))
                 .map(|hollow| narrower_where_likelier(p, &sample, hollow));
             let standing = match hollow {
-                Some((hollow, narrowed)) => (hollow, converged.len() + 1 + narrowed),
+                // (the hollow reading and its narrower hole converged beside the finalists)
+                Some(hollow) => (hollow, converged.len() + 2),
                 None => (winner, converged.len()),
             };
             beside_rings_across(p, &sample, standing, None)
@@ -522,13 +523,10 @@ fn reading_finalist(
 /// `hollow`, a noisy cloud's hollow reading that stood, or its outline around a narrower
 /// hole ([`Prepared::narrowed`]) converged by the likelihood on `sample`, whichever is
 /// the likelier (the hollow reading's start sets its wall, which the likelihood weighs
-/// only at the rims); with the readings converged for it (0 or 1).
-fn narrower_where_likelier(p: &Prepared, sample: &Sample, hollow: Scored) -> (Scored, usize) {
-    let Some(narrower) = p.narrowed(&hollow.candidate) else {
-        return (hollow, 0);
-    };
-    let standing = reading_finalist(p, sample, narrower, hollow, hollow).unwrap_or(hollow);
-    (standing, 1)
+/// only at the rims).
+fn narrower_where_likelier(p: &Prepared, sample: &Sample, hollow: Scored) -> Scored {
+    let narrower = p.narrowed(&hollow.candidate);
+    reading_finalist(p, sample, narrower, hollow, hollow).unwrap_or(hollow)
 }
 
 /// A least-squares `finalist` converged by the likelihood on `sample`, to be weighed
