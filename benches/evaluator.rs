@@ -1,7 +1,9 @@
 //! Point-Jacobian evaluations per second (residual + 12-column gradient + reduction to
 //! normal equations) for N points x K candidates, GPU (whatever adapter wgpu finds:
 //! lavapipe on a machine without a GPU) against the f64 CPU evaluator. The N = 1000,
-//! K = 1 GPU case is the round-trip latency of one solver iteration.
+//! K = 1 GPU case is the round-trip latency of one solver iteration. Beside them, one
+//! evaluation of the fit's objective with its gradient and BHHH Hessian (`objective`):
+//! the f64 loop against the kernel, a noisy view of N points seen from its sensor.
 //!
 //! `cargo bench --bench evaluator`; `SUPERTOROID_BENCH_QUICK=1` keeps N <= 1e5.
 
@@ -73,5 +75,49 @@ fn bench_normal_equations(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_normal_equations);
+fn bench_objective(c: &mut Criterion) {
+    use supertoroid::fit::Sight;
+    use supertoroid::fit::objective::{Data, Objective, Sensor, parameters};
+    let shape = Shape::new(0.3, 0.2, 0.12, 2.0, 0.7, 1.3);
+    let pose = Pose::new(DQuat::from_rotation_x(0.3), DVec3::new(0.05, -0.02, 0.1));
+    let candidate = Candidate { shape, pose };
+    let sigma = 0.02;
+    let device = GpuContext::shared(&AdapterChoice::from_env())
+        .and_then(|ctx| GpuObjective::shared(&ctx))
+        .map_err(|e| eprintln!("no GPU adapter, the objective on the CPU only: {e}"))
+        .ok();
+    let mut group = c.benchmark_group("objective");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(2));
+    let mut rng = synth::rng(2);
+    for n in [1_000usize, 4_000, 16_000] {
+        let mut points = synth::sample_surface(&shape, &pose, n, &mut rng);
+        synth::add_noise(&mut points, sigma, &mut rng);
+        let sensor = Sensor::new(&points, Sight::at(DVec3::new(0.9, -1.4, 1.1)));
+        let x = parameters(&candidate, sigma);
+        for (kind, on) in [("cpu", None), ("gpu", device.as_deref())] {
+            if kind == "gpu" && on.is_none() {
+                continue;
+            }
+            let data = Data {
+                points: &points,
+                outlier_weight: 0.05,
+                outlier_density: 0.05 / 8.0,
+                sensor: Some(&sensor),
+                device: on,
+            };
+            let mut objective = Objective::new(&data, &candidate, sigma);
+            objective.hold(&x);
+            group.throughput(Throughput::Elements(n as u64));
+            group.bench_function(BenchmarkId::new(kind, n), |b| {
+                b.iter(|| objective.evaluate(&x, true))
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_normal_equations, bench_objective);
 criterion_main!(benches);

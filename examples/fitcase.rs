@@ -107,6 +107,7 @@ fn main() {
                 outlier_density: LIKELIHOOD_OUTLIER_WEIGHT
                     / likelihood::outlier_volume(&sample, 2e-3),
                 sensor: sensor.as_ref(),
+                device: None,
             };
             let limits = objective::Limits {
                 bounds: options.bounds(),
@@ -134,6 +135,7 @@ fn main() {
                     vv.map(|v| objective::Sensor::new(&sample, supertoroid::fit::Sight::at(v)));
                 let d2 = objective::Data {
                     sensor: sensor2.as_ref(),
+                    device: None,
                     ..data
                 };
                 println!(

@@ -66,6 +66,7 @@ fn main() {
             outlier_weight: LIKELIHOOD_OUTLIER_WEIGHT,
             outlier_density: LIKELIHOOD_OUTLIER_WEIGHT / volume,
             sensor: sensor.as_ref(),
+            device: None,
         };
         let olimits = objective::Limits {
             bounds: options.bounds(),

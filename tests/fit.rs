@@ -2080,6 +2080,7 @@ fn the_objective_keeps_the_rims_of_a_pinched_section_seen_by_a_sensor() {
         outlier_weight: LIKELIHOOD_OUTLIER_WEIGHT,
         outlier_density: LIKELIHOOD_OUTLIER_WEIGHT / likelihood::outlier_volume(&points, 2e-3),
         sensor: Some(&sensor),
+        device: None,
     };
     let new = objective::value(&data, &truth, sigma);
     let grid = likelihood::objective(

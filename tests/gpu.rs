@@ -566,3 +566,88 @@ fn free_space_points_count_only_inside_the_candidate() {
     assert_eq!(gr.len(), 2 * surface.len() + 150);
     assert_eq!(cpu.residuals_on(&batch, &which).unwrap().len(), gr.len());
 }
+
+/// The objective's kernel (`shaders/objective.wgsl`) against its f64 loop: value,
+/// gradient and BHHH Hessian of a noisy cloud with outliers, with and without a sensor,
+/// on a ring, an open superellipsoid and a thin square-sectioned tube.
+#[test]
+fn the_objective_on_the_gpu_matches_the_f64_loop() {
+    use supertoroid::fit::Sight;
+    use supertoroid::fit::objective::{Data, Objective, Sensor, parameters};
+    let device = GpuObjective::shared(&context()).expect("the objective's kernel compiles");
+    let shapes = [
+        Shape::new(0.3, 0.2, 0.12, 2.0, 0.7, 1.3),
+        Shape::new(0.3, 0.25, 0.2, 0.0, 0.6, 1.4),
+        Shape::new(0.3, 0.15, 0.06, 2.3, 1.5, 0.3),
+    ];
+    for (s, shape) in shapes.into_iter().enumerate() {
+        let pose = Pose::new(
+            DQuat::from_scaled_axis(DVec3::new(0.3, -0.2, 0.5)),
+            DVec3::new(0.05, -0.02, 0.1),
+        );
+        let mut rng = synth::rng(40 + s as u64);
+        let mut points = synth::sample_surface(&shape, &pose, 800, &mut rng);
+        synth::add_noise(&mut points, 0.02, &mut rng);
+        points.extend((0..40).map(|_| {
+            DVec3::new(
+                rng.random_range(-0.6..0.6),
+                rng.random_range(-0.6..0.6),
+                rng.random_range(-0.6..0.6),
+            )
+        }));
+        let sensor = Sensor::new(&points, Sight::at(DVec3::new(0.9, -1.4, 1.1)));
+        let start = Candidate {
+            shape: Shape::new(
+                shape.a1 * 1.03,
+                shape.a2 * 0.98,
+                shape.a3 * 1.05,
+                shape.a4,
+                shape.eps1 + 0.05,
+                shape.eps2 - 0.05,
+            ),
+            pose: Pose::new(pose.rotation, DVec3::new(0.06, -0.03, 0.1)),
+        };
+        for seen in [false, true] {
+            let cpu_data = Data {
+                points: &points,
+                outlier_weight: 0.05,
+                outlier_density: 0.05 / 8.0,
+                sensor: seen.then_some(&sensor),
+                device: None,
+            };
+            let gpu_data = Data {
+                device: Some(&device),
+                ..cpu_data
+            };
+            let x = parameters(&start, 0.025);
+            let mut cpu = Objective::new(&cpu_data, &start, 0.025);
+            let mut gpu = Objective::new(&gpu_data, &start, 0.025);
+            cpu.hold(&x);
+            gpu.hold(&x);
+            let (value, gradient, hessian) = cpu.evaluate(&x, true);
+            let (g_value, g_gradient, g_hessian) = gpu.evaluate(&x, true);
+            let case = format!("{shape:?}, seen {seen}");
+            // (f32 sums never equal the f64 loop's to the bit: the kernel ran, no fallback)
+            assert_ne!(value, g_value, "{case}: the device's value is the loop's");
+            assert!(
+                (value - g_value).abs() < 1e-5 * value.abs().max(1.0),
+                "{case}: {value} vs {g_value}"
+            );
+            let scale = gradient.amax().max(1e-3);
+            assert!(
+                (gradient - g_gradient).amax() < 1e-4 * scale,
+                "{case}: {gradient} vs {g_gradient}"
+            );
+            let scale = hessian.amax();
+            assert!(
+                (hessian - g_hessian).amax() < 1e-4 * scale,
+                "{case}: Hessians differ"
+            );
+            let (value_only, _, _) = gpu.evaluate(&x, false);
+            assert!(
+                (value_only - g_value).abs() < 1e-6 * value.abs().max(1.0),
+                "{case}"
+            );
+        }
+    }
+}

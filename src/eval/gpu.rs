@@ -255,7 +255,7 @@ impl GpuContext {
         self.info.device_type == wgpu::DeviceType::Cpu
     }
 
-    fn check(&self) -> Result<(), EvalError> {
+    pub(super) fn check(&self) -> Result<(), EvalError> {
         match self.failure.lock().unwrap().clone() {
             Some(e) => Err(EvalError::Device(e)),
             None => Ok(()),
@@ -264,12 +264,12 @@ impl GpuContext {
 }
 
 /// A buffer that grows (to the next power of two) and is never shrunk.
-struct Grown {
-    buffer: wgpu::Buffer,
+pub(super) struct Grown {
+    pub(super) buffer: wgpu::Buffer,
     capacity: u64,
 }
 
-fn ensure(
+pub(super) fn ensure_buffer(
     ctx: &GpuContext,
     slot: &mut Option<Grown>,
     bytes: u64,
@@ -369,7 +369,7 @@ impl GpuEvaluator {
                 .map(|(c, &s)| GpuCandidate::from(c, (self.sets[s].0, self.sets[s].1))),
         );
         let bytes = std::mem::size_of_val(self.scratch.as_slice()) as u64;
-        if ensure(
+        if ensure_buffer(
             &self.ctx,
             &mut self.candidates,
             bytes,
@@ -393,10 +393,10 @@ impl GpuEvaluator {
         let usage = wgpu::BufferUsages::STORAGE
             | wgpu::BufferUsages::COPY_SRC
             | wgpu::BufferUsages::COPY_DST;
-        if ensure(&self.ctx, &mut self.output, bytes, usage, "output") {
+        if ensure_buffer(&self.ctx, &mut self.output, bytes, usage, "output") {
             self.bind_group = None;
         }
-        ensure(
+        ensure_buffer(
             &self.ctx,
             &mut self.staging,
             bytes,
@@ -527,7 +527,7 @@ impl GpuEvaluator {
 }
 
 /// Every partial ends in the marker 1.0 that its workgroup writes last.
-fn check_markers(out: &[f32], stride: usize) -> Result<(), EvalError> {
+pub(super) fn check_markers(out: &[f32], stride: usize) -> Result<(), EvalError> {
     if out.chunks(stride).all(|p| p[stride - 1] == 1.0) {
         Ok(())
     } else {
@@ -553,6 +553,10 @@ impl Evaluator for GpuEvaluator {
         self.ctx.adapter_name()
     }
 
+    fn objective_device(&self) -> Option<Arc<super::GpuObjective>> {
+        super::GpuObjective::shared(&self.ctx).ok()
+    }
+
     fn set_point_sets_with_free_space(&mut self, sets: &[PointSet]) -> Result<(), EvalError> {
         let total: usize = sets
             .iter()
@@ -573,7 +577,7 @@ impl Evaluator for GpuEvaluator {
             })
             .map(|(p, w)| [p.x as f32, p.y as f32, p.z as f32, w])
             .collect();
-        if ensure(
+        if ensure_buffer(
             &self.ctx,
             &mut self.points,
             bytes,

@@ -9,12 +9,21 @@
 //!
 //! Points are given in a normalised frame (centred and scaled, see [`Normalization`]);
 //! the candidates are expressed in that same frame.
+//!
+//! The fit's objective (`fit::objective`) runs its per-point sums where the search's
+//! evaluator says ([`Evaluator::objective_device`]): the GPU evaluator's adapter
+//! ([`GpuObjective`], `shaders/objective.wgsl`), or the objective's own f64 loop.
 
 mod cpu;
 mod gpu;
+mod gpu_objective;
 
 pub use cpu::CpuEvaluator;
 pub use gpu::{AdapterChoice, GpuContext, GpuEvaluator};
+pub use gpu_objective::{
+    FLAG_GRADIENT, FLAG_SENSOR, FLAG_VISIBILITY, GpuObjective, OBJECTIVE_SHADER_SOURCE,
+    ObjectiveJob, ObjectiveParams, ObjectiveSums,
+};
 
 use crate::model::{Pose, Shape};
 use glam::DVec3;
@@ -197,6 +206,12 @@ pub trait Evaluator: Send {
         candidates: &[Candidate],
         sets: &[usize],
     ) -> Result<Vec<f64>, EvalError>;
+
+    /// The GPU the fit's objective runs its per-point sums on, where this evaluator has
+    /// one (`fit::objective`; none: its f64 loop).
+    fn objective_device(&self) -> Option<std::sync::Arc<GpuObjective>> {
+        None
+    }
 
     /// Point sets of surface points only.
     fn set_point_sets(&mut self, sets: &[&[DVec3]]) -> Result<(), EvalError> {

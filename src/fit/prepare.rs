@@ -4,6 +4,8 @@
 //! noise model's limits, the other reading of a top view, collapsed starts).
 
 use super::*;
+use crate::eval::GpuObjective;
+use std::sync::Arc;
 
 /// `shape` with the known parameters (normalised sizes) put in.
 pub(super) fn holding_known(shape: Shape, known: &[Option<f64>; 6]) -> Shape {
@@ -84,6 +86,9 @@ pub(super) struct Prepared<'a> {
     /// the time budget's end, counted from the preparation's start
     /// ([`FitOptions::time_budget_ms`]): no likelihood step is taken past it
     pub(super) deadline: Option<Instant>,
+    /// where the objective's per-point sums run (the search's evaluator's GPU, or the
+    /// f64 loop)
+    pub(super) device: Option<Arc<GpuObjective>>,
 }
 
 pub(super) fn prepare<'a>(
@@ -186,6 +191,7 @@ pub(super) fn prepare<'a>(
         deadline: o.time_budget_ms.and_then(|budget| {
             started.checked_add(std::time::Duration::try_from_secs_f64(budget / 1e3).ok()?)
         }),
+        device: None,
     })
 }
 

@@ -308,6 +308,7 @@ mod tests {
             outlier_weight: 0.05,
             outlier_density: 0.05 / 8.0,
             sensor: None,
+            device: None,
         };
         let errors = |count: usize, held: [bool; 6]| {
             likelihood_errors(&data, &candidate, sigma, count, &held).unwrap()

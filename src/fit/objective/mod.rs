@@ -23,17 +23,22 @@
 //! heights and radii. No surface grid is built per evaluation but the normaliser's coarse
 //! one ([`normaliser`]).
 //!
+//! The per-point sums run in the f64 loop of `Window::sums`, or with a device in the
+//! data ([`Data::device`], the GPU evaluator's) in its WGSL kernel (`device.rs`), f32 term
+//! for term; the tests hold the two together.
+//!
 //! Parameters: shape a1 a2 a3 a4 eps1 eps2, translation, a rotation vector applied on the
 //! left of the reference rotation (world frame), ln sigma. The gradient is analytic (A's
 //! too, [`normaliser`]); the Hessian is the BHHH outer product of the points' scores.
 
+mod device;
 pub mod normaliser;
 mod refine;
 pub mod tables;
 
 pub use refine::{Limits, Refined, STOP_DECREASE, refine, refine_on, value, value_on};
 
-use crate::eval::Candidate;
+use crate::eval::{Candidate, GpuObjective};
 use crate::fit::sight::Sight;
 use crate::model::{Pose, Shape};
 use glam::{DQuat, DVec3};
@@ -87,6 +92,8 @@ pub struct Data<'a> {
     /// w / V, the outliers' density
     pub outlier_density: f64,
     pub sensor: Option<&'a Sensor>,
+    /// where the per-point sums run: the GPU's kernel, or (none) the f64 loop here
+    pub device: Option<&'a GpuObjective>,
 }
 
 /// The parameter vector of a candidate and sigma (the turn zero: the candidate's rotation
@@ -199,6 +206,15 @@ impl<'a> Objective<'a> {
         let inverse = rotation.inverse();
         let kernel_scale = (std::f64::consts::TAU * sigma * sigma).powf(-1.5);
         let inlier = (1.0 - self.data.outlier_weight) * kernel_scale / normaliser.area;
+        if let Some(device) = self.data.device {
+            let pose = Pose::new(rotation, translation);
+            // (a device that fails leaves the evaluation to the loop below)
+            if let Some(sums) =
+                device::sums(device, self.data, &window, &pose, inlier, with_gradient)
+            {
+                return sums;
+            }
+        }
         let point_term = |i: usize, x_world: DVec3| -> (f64, Vector) {
             let d = x_world - translation;
             let q = inverse * d;

@@ -56,6 +56,7 @@ fn density_integral(shape: Shape, viewpoint: Option<DVec3>) -> f64 {
             outlier_weight: 0.0,
             outlier_density: 1e-300,
             sensor: sensor.as_ref(),
+            device: None,
         };
         let objective = Objective {
             data: &data,
@@ -114,6 +115,7 @@ fn gradient_matches_differences(shape: Shape, sensor: bool) {
         outlier_weight: 0.05,
         outlier_density: 0.05 / 8.0,
         sensor: sensor.then_some(&sensor_model),
+        device: None,
     };
     let mut start_shape = shape.to_array();
     for (k, v) in start_shape.iter_mut().enumerate() {
@@ -172,6 +174,7 @@ fn refinement_recovers_a_noisy_section() {
         outlier_weight: 0.05,
         outlier_density: 0.05 / 8.0,
         sensor: None,
+        device: None,
     };
     let start = Candidate {
         shape: Shape::new(0.3, 0.3, 0.095, 2.0, 0.8, 1.0),

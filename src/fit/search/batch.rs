@@ -258,6 +258,10 @@ fn searched_once(
     let mut round1_best: Vec<Option<Round1Best>> = vec![None; clouds.len()];
     let mut free_best: Vec<Option<Candidate>> = vec![None; clouds.len()];
     let backend = BackendOut::of(evaluator);
+    let device = evaluator.objective_device();
+    for (_, p) in groups.iter_mut().flatten() {
+        p.device = device.clone();
+    }
     for mut group in groups {
         // a superellipsoid fit starts at its cloud's free fit's outline too (both clouds
         // share one normalisation): where the free fit is an apple without a dimple, the

@@ -40,11 +40,12 @@ pub mod polish;
 mod rounds;
 
 use super::*;
-use crate::eval::Normalization;
+use crate::eval::{GpuObjective, Normalization};
 use crate::fit::objective::{self, Data, Sensor};
 use basins::most_likely_distinct;
 use estimator::{collapsed, collapsed_section, noisy};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Least-squares iterations of round 1 (starts a few iterations apart have found their
 /// basins; the rest is round 2's).
@@ -139,6 +140,8 @@ pub(super) struct Sample {
     /// on the surface its points fell is unknown, and candidates are scored by their
     /// points' distances alone ([`Sample::distance_score`])
     distances_only: bool,
+    /// where the objective's per-point sums run ([`Prepared`]'s device)
+    device: Option<Arc<GpuObjective>>,
 }
 
 impl Sample {
@@ -151,7 +154,13 @@ impl Sample {
             sensor: sight.map(|s| Sensor::new(points, s)),
             outlier_density: LIKELIHOOD_OUTLIER_WEIGHT / volume,
             distances_only: sight.is_none() && !all_round,
+            device: None,
         }
+    }
+
+    /// The sample with its objective's sums on `device`.
+    pub(super) fn on(self, device: Option<Arc<GpuObjective>>) -> Self {
+        Self { device, ..self }
     }
 
     /// The negative mean log-likelihood of the points' first-order distances to a
@@ -190,6 +199,7 @@ impl Sample {
             outlier_weight: LIKELIHOOD_OUTLIER_WEIGHT,
             outlier_density: self.outlier_density,
             sensor: self.sensor.as_ref(),
+            device: self.device.as_deref(),
         }
     }
 

@@ -34,7 +34,7 @@ pub(super) fn round1(
         .collect();
     let samples1: Vec<Sample> = group
         .iter()
-        .map(|(_, p)| Sample::new(&p.stage1_pts, p.sight(), true))
+        .map(|(_, p)| Sample::new(&p.stage1_pts, p.sight(), true).on(p.device.clone()))
         .collect();
     let sets1: Vec<PointSet> = group.iter().map(|(_, p)| p.stage1_set()).collect();
     evaluator.set_point_sets_with_free_space(&sets1)?;
@@ -87,7 +87,7 @@ pub(super) fn round1(
     let by_distances: Vec<Scored> = if from_nowhere.contains(&true) {
         let samples: Vec<Sample> = group
             .iter()
-            .map(|(_, p)| Sample::new(&p.stage1_pts, None, false))
+            .map(|(_, p)| Sample::new(&p.stage1_pts, None, false).on(p.device.clone()))
             .collect();
         scored1
             .par_iter()
@@ -143,7 +143,7 @@ pub(super) fn round1(
 
 /// Each cloud's sample for the likelihood as round 1 read it.
 fn sample_of(p: &Prepared, points: &[DVec3], all_round: bool) -> Sample {
-    Sample::new(points, p.sight(), all_round)
+    Sample::new(points, p.sight(), all_round).on(p.device.clone())
 }
 
 /// Round 2: round 1's kept candidates, and the other reading of the best one's top view,
