@@ -157,6 +157,35 @@ fn gpu_and_cpu_fits_agree_on_a_clean_cloud() {
     );
 }
 
+/// A noisy full cloud fitted on the GPU evaluator: its search's likelihood runs on the
+/// objective's kernel (the device counts its evaluations), and the fit is right as the
+/// CPU's is.
+#[test]
+fn a_noisy_fit_on_the_gpu_ranks_by_the_objectives_kernel() {
+    let ctx =
+        GpuContext::shared(&AdapterChoice::from_env()).expect("a GPU adapter (lavapipe in CI)");
+    let device = GpuObjective::shared(&ctx).expect("the objective's kernel compiles");
+    let case = make_case(131, false, 0.02, 0.0);
+    let before = device.evaluations();
+    let gpu = fit(
+        &mut GpuEvaluator::new(ctx),
+        &case.points,
+        &FitOptions::default(),
+    )
+    .unwrap();
+    let on_device = device.evaluations() - before;
+    assert!(on_device >= 10, "{on_device} evaluations on the device");
+    let cpu = fit(
+        &mut CpuEvaluator::new(),
+        &case.points,
+        &FitOptions::default(),
+    )
+    .unwrap();
+    let e_gpu = compare((&case.shape, &case.pose), (&gpu.fitted.0, &gpu.fitted.1));
+    let e_cpu = compare((&case.shape, &case.pose), (&cpu.fitted.0, &cpu.fitted.1));
+    assert!(e_cpu.success() && e_gpu.success(), "{e_cpu:?} / {e_gpu:?}");
+}
+
 /// A dense cloud (a depth mask's tens of thousands of points) is fitted on an even
 /// stride of at most `MAX_FIT_POINTS`, its strays set aside among those, and the fit is
 /// the ring's; the report says what it read.

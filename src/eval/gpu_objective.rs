@@ -6,6 +6,7 @@
 
 use super::EvalError;
 use super::gpu::{GpuContext, ensure_buffer};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// The kernel source, checked by naga in the tests and compiled by wgpu on first use.
@@ -80,6 +81,8 @@ pub struct GpuObjective {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
     buffers: Mutex<Buffers>,
+    /// evaluations completed on the device
+    evaluations: AtomicU64,
 }
 
 #[derive(Default)]
@@ -142,6 +145,7 @@ impl GpuObjective {
             layout,
             pipeline,
             buffers: Mutex::new(Buffers::default()),
+            evaluations: AtomicU64::new(0),
         })
     }
 
@@ -301,7 +305,14 @@ impl GpuObjective {
         staging.unmap();
         ctx.check()?;
         super::gpu::check_markers(&values, NV_OUT)?;
+        self.evaluations.fetch_add(1, Ordering::Relaxed);
         Ok(finish(&values))
+    }
+
+    /// How many evaluations the device has completed (a fit on the GPU evaluator counts
+    /// its search's likelihood here).
+    pub fn evaluations(&self) -> u64 {
+        self.evaluations.load(Ordering::Relaxed)
     }
 }
 
