@@ -251,6 +251,48 @@ impl GpuContext {
         rx.recv().map_err(|e| device(&e))?.map_err(|e| device(&e))
     }
 
+    /// One dispatch of `pipeline` over `groups` workgroups with `bind_group`: the first
+    /// `bytes` of `output` cleared before it and copied to `staging` after; submitted,
+    /// waited for and returned as f32.
+    pub(super) fn dispatch_and_read(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        bind_group: &wgpu::BindGroup,
+        groups: (u32, u32),
+        output: &wgpu::Buffer,
+        staging: &wgpu::Buffer,
+        bytes: u64,
+    ) -> Result<Vec<f32>, EvalError> {
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("evaluate"),
+            });
+        encoder.clear_buffer(output, 0, Some(bytes));
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("evaluate"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, bind_group, &[]);
+            pass.dispatch_workgroups(groups.0, groups.1, 1);
+        }
+        encoder.copy_buffer_to_buffer(output, 0, staging, 0, bytes);
+        let submission = self.queue.submit(Some(encoder.finish()));
+        let slice = staging.slice(..bytes);
+        self.map_for_reading(&slice, submission)?;
+        let values = {
+            let view = slice
+                .get_mapped_range()
+                .map_err(|e| EvalError::Device(e.to_string()))?;
+            bytemuck::cast_slice::<u8, f32>(&view).to_vec()
+        };
+        staging.unmap();
+        self.check()?;
+        Ok(values)
+    }
+
     pub fn is_software(&self) -> bool {
         self.info.device_type == wgpu::DeviceType::Cpu
     }
@@ -454,35 +496,8 @@ impl GpuEvaluator {
         };
         let output = &self.output.as_ref().unwrap().buffer;
         let staging = &self.staging.as_ref().unwrap().buffer;
-        let mut encoder = self
-            .ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("evaluate"),
-            });
-        encoder.clear_buffer(output, 0, Some(bytes));
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("evaluate"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(groups.0, groups.1, 1);
-        }
-        encoder.copy_buffer_to_buffer(output, 0, staging, 0, bytes);
-        let submission = self.ctx.queue.submit(Some(encoder.finish()));
-        let slice = staging.slice(..bytes);
-        self.ctx.map_for_reading(&slice, submission)?;
-        let values = {
-            let view = slice
-                .get_mapped_range()
-                .map_err(|e| EvalError::Device(e.to_string()))?;
-            bytemuck::cast_slice::<u8, f32>(&view).to_vec()
-        };
-        staging.unmap();
-        self.ctx.check()?;
-        Ok(values)
+        self.ctx
+            .dispatch_and_read(pipeline, &bind_group, groups, output, staging, bytes)
     }
 
     /// Runs a reduction kernel whose workgroups each write `stride` values (the last one

@@ -275,35 +275,15 @@ impl GpuObjective {
             layout: &self.layout,
             entries: &entries,
         });
-        let output = &bound[5];
         let staging = buffer(&b.staging);
-        let mut encoder = ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("objective"),
-            });
-        encoder.clear_buffer(output, 0, Some(out_bytes));
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("objective"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(groups_x as u32, 1, 1);
-        }
-        encoder.copy_buffer_to_buffer(output, 0, &staging, 0, out_bytes);
-        let submission = ctx.queue.submit(Some(encoder.finish()));
-        let slice = staging.slice(..out_bytes);
-        ctx.map_for_reading(&slice, submission)?;
-        let values: Vec<f32> = {
-            let view = slice
-                .get_mapped_range()
-                .map_err(|e| EvalError::Device(e.to_string()))?;
-            bytemuck::cast_slice::<u8, f32>(&view).to_vec()
-        };
-        staging.unmap();
-        ctx.check()?;
+        let values = ctx.dispatch_and_read(
+            &self.pipeline,
+            &bind_group,
+            (groups_x as u32, 1),
+            &bound[5],
+            &staging,
+            out_bytes,
+        )?;
         super::gpu::check_markers(&values, NV_OUT)?;
         self.evaluations.fetch_add(1, Ordering::Relaxed);
         Ok(finish(&values))
