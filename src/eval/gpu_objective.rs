@@ -5,7 +5,7 @@
 //! quadrature is the reference the tests hold this one to.
 
 use super::EvalError;
-use super::gpu::{GpuContext, ensure_buffer};
+use super::gpu::{GpuContext, Grown, ensure_buffer};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -87,13 +87,14 @@ pub struct GpuObjective {
 
 #[derive(Default)]
 struct Buffers {
-    params: Option<super::gpu::Grown>,
-    points: Option<super::gpu::Grown>,
-    nodes: Option<super::gpu::Grown>,
-    sweep: Option<super::gpu::Grown>,
-    cells: Option<super::gpu::Grown>,
-    output: Option<super::gpu::Grown>,
-    staging: Option<super::gpu::Grown>,
+    params: Option<Grown>,
+    points: Option<Grown>,
+    nodes: Option<Grown>,
+    sweep: Option<Grown>,
+    cells: Option<Grown>,
+    output: Option<Grown>,
+    staging: Option<Grown>,
+    bind_group: Option<wgpu::BindGroup>,
 }
 
 impl GpuObjective {
@@ -193,95 +194,95 @@ impl GpuObjective {
         let out_bytes = (out_values * 4) as u64;
         let mut b = self.buffers.lock().unwrap_or_else(|e| e.into_inner());
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
-        let upload = |slot: &mut Option<super::gpu::Grown>, bytes: &[u8], usage, label| {
-            ensure_buffer(ctx, slot, bytes.len() as u64, usage, label);
-            if !bytes.is_empty() {
-                ctx.queue
-                    .write_buffer(&slot.as_ref().unwrap().buffer, 0, bytes);
-            }
-        };
         let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
-        upload(
-            &mut b.params,
-            bytemuck::bytes_of(&params),
-            uniform,
-            "objective params",
-        );
-        upload(
-            &mut b.points,
-            bytemuck::cast_slice(job.points),
-            storage,
-            "objective points",
-        );
-        upload(
-            &mut b.nodes,
-            bytemuck::cast_slice(job.nodes),
-            storage,
-            "objective nodes",
-        );
-        upload(
-            &mut b.sweep,
-            bytemuck::cast_slice(job.sweep),
-            storage,
-            "objective sweep",
-        );
         // (a binding may not be empty)
         let cells: &[u32] = if job.cells.is_empty() {
             &[0]
         } else {
             job.cells
         };
+        let Buffers {
+            params: params_buffer,
+            points,
+            nodes,
+            sweep,
+            cells: cells_buffer,
+            output,
+            staging,
+            bind_group,
+        } = &mut *b;
+        let mut grown = false;
+        let mut upload = |slot: &mut Option<Grown>, bytes: &[u8], usage, label| {
+            grown |= ensure_buffer(ctx, slot, bytes.len() as u64, usage, label);
+            ctx.queue
+                .write_buffer(&slot.as_ref().unwrap().buffer, 0, bytes);
+        };
         upload(
-            &mut b.cells,
+            params_buffer,
+            bytemuck::bytes_of(&params),
+            uniform,
+            "objective params",
+        );
+        upload(
+            points,
+            bytemuck::cast_slice(job.points),
+            storage,
+            "objective points",
+        );
+        upload(
+            nodes,
+            bytemuck::cast_slice(job.nodes),
+            storage,
+            "objective nodes",
+        );
+        upload(
+            sweep,
+            bytemuck::cast_slice(job.sweep),
+            storage,
+            "objective sweep",
+        );
+        upload(
+            cells_buffer,
             bytemuck::cast_slice(cells),
             storage,
             "objective cells",
         );
-        ensure_buffer(
-            ctx,
-            &mut b.output,
-            out_bytes,
-            wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_SRC
-                | wgpu::BufferUsages::COPY_DST,
-            "objective output",
-        );
-        ensure_buffer(
-            ctx,
-            &mut b.staging,
-            out_bytes,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            "objective staging",
-        );
-        let buffer = |slot: &Option<super::gpu::Grown>| slot.as_ref().unwrap().buffer.clone();
-        let bound = [
-            buffer(&b.params),
-            buffer(&b.points),
-            buffer(&b.nodes),
-            buffer(&b.sweep),
-            buffer(&b.cells),
-            buffer(&b.output),
-        ];
-        let entries: Vec<wgpu::BindGroupEntry> = bound
-            .iter()
-            .enumerate()
-            .map(|(i, buffer)| wgpu::BindGroupEntry {
-                binding: i as u32,
-                resource: buffer.as_entire_binding(),
-            })
-            .collect();
-        let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("objective"),
-            layout: &self.layout,
-            entries: &entries,
-        });
-        let staging = buffer(&b.staging);
+        let read_back = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST;
+        grown |= ensure_buffer(ctx, output, out_bytes, read_back, "objective output");
+        let mapped = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+        ensure_buffer(ctx, staging, out_bytes, mapped, "objective staging");
+        // (the bind group holds the buffers: made again only when one of them grew)
+        if grown || bind_group.is_none() {
+            let bound = [
+                buffer(params_buffer),
+                buffer(points),
+                buffer(nodes),
+                buffer(sweep),
+                buffer(cells_buffer),
+                buffer(output),
+            ];
+            let entries: Vec<wgpu::BindGroupEntry> = bound
+                .iter()
+                .enumerate()
+                .map(|(i, buffer)| wgpu::BindGroupEntry {
+                    binding: i as u32,
+                    resource: buffer.as_entire_binding(),
+                })
+                .collect();
+            *bind_group = Some(ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("objective"),
+                layout: &self.layout,
+                entries: &entries,
+            }));
+        }
         let values = ctx.dispatch_and_read(
             &self.pipeline,
-            &bind_group,
+            bind_group.as_ref().unwrap(),
             (groups_x as u32, 1),
-            &bound[5],
-            &staging,
+            buffer(output),
+            buffer(staging),
             out_bytes,
         )?;
         super::gpu::check_markers(&values, NV_OUT)?;
@@ -294,6 +295,11 @@ impl GpuObjective {
     pub fn evaluations(&self) -> u64 {
         self.evaluations.load(Ordering::Relaxed)
     }
+}
+
+/// The buffer a grown slot holds (every slot is filled before it is bound).
+fn buffer(slot: &Option<Grown>) -> &wgpu::Buffer {
+    &slot.as_ref().expect("filled before binding").buffer
 }
 
 /// The workgroups' partials added up in f64 and unpacked.
