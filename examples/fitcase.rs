@@ -3,9 +3,12 @@
 //! with PAPER set, by `Method::Paper`; with TRUTH set, the likelihood of the fit against the truth refined;
 //! with AXIS set, the true hole axis in the cloud's frame (to set beside the search's candidates).
 //! with SKIP=stage,... set, without those optional stages (as `bench synthetic --skip`);
-//! with BROAD set, the seeds are views of the broadened suite (`bench broad`).
+//! with BROAD set, the seeds are views of the broadened suite (`bench broad`); with GPU set,
+//! fitted on the GPU evaluator.
 use supertoroid::bench::synthetic::{Presentation, category, presented};
-use supertoroid::eval::{CpuEvaluator, Normalization};
+use supertoroid::eval::{
+    AdapterChoice, CpuEvaluator, Evaluator, GpuContext, GpuEvaluator, Normalization,
+};
 use supertoroid::fit::{FitOptions, LIKELIHOOD_OUTLIER_WEIGHT, fit, likelihood, objective};
 use supertoroid::model::Pose;
 use supertoroid::suite::ground_truth::{compare, make_case};
@@ -52,7 +55,16 @@ fn main() {
             skip,
             ..Default::default()
         };
-        let r = fit(&mut CpuEvaluator::new(), &points, &options).unwrap();
+        // GPU=1: the GPU evaluator (its least squares and the search's likelihood on the
+        // adapter) instead of the CPU's
+        let mut evaluator: Box<dyn Evaluator> = if std::env::var("GPU").is_ok() {
+            Box::new(GpuEvaluator::new(
+                GpuContext::shared(&AdapterChoice::from_env()).expect("a GPU adapter"),
+            ))
+        } else {
+            Box::new(CpuEvaluator::new())
+        };
+        let r = fit(evaluator.as_mut(), &points, &options).unwrap();
         let f = r.fitted.1;
         let pose = Pose::new(back.rotation * f.rotation, back.to_world(f.translation));
         let e = compare((&case.shape, &case.pose), (&r.fitted.0, &pose));
