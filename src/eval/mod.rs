@@ -21,8 +21,8 @@ mod gpu_objective;
 pub use cpu::CpuEvaluator;
 pub use gpu::{AdapterChoice, GpuContext, GpuEvaluator};
 pub use gpu_objective::{
-    FLAG_GRADIENT, FLAG_SENSOR, FLAG_VISIBILITY, GpuObjective, OBJECTIVE_SHADER_SOURCE,
-    ObjectiveJob, ObjectiveParams, ObjectiveSums,
+    FLAG_GRADIENT, FLAG_SENSOR, FLAG_VISIBILITY, GpuObjective, OBJECTIVE_PARAMETERS,
+    OBJECTIVE_SHADER_SOURCE, ObjectiveJob, ObjectiveParams, ObjectiveSums,
 };
 
 use crate::model::{Pose, Shape};

@@ -10,6 +10,9 @@ use crate::eval::{
 use crate::model::Pose;
 use glam::DMat3;
 
+// (the kernel's parameters are the objective's)
+const _: () = assert!(crate::eval::OBJECTIVE_PARAMETERS == super::PARAMETERS);
+
 /// The negative mean log-likelihood, its gradient and the BHHH Hessian of `data` at the
 /// window's candidate (at `pose`, inliers weighted by `inlier`) from the device; none
 /// where the device failed.
