@@ -34,8 +34,9 @@ pub(super) fn sums(
         })
         .collect();
     // (neighbours in space side by side: a subgroup's points then walk the same
-    // quadrature cells, and the kernel's loops diverge less; the sums are the same)
-    points.sort_by_key(|p| morton_key([p[0], p[1], p[2]]));
+    // quadrature cells, and the kernel's loops diverge less; the sums are the same; each
+    // key computed once, and equal keys keep their order)
+    points.sort_by_cached_key(|p| morton_key([p[0], p[1], p[2]]));
     let (nodes, sweep, cells) = packed(window);
     let job = ObjectiveJob {
         points: &points,
