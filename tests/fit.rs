@@ -1374,6 +1374,36 @@ fn a_tall_roll_seen_from_the_side_gets_its_wall() {
     assert!(closed.a4 < 1.0, "{closed:?}");
 }
 
+/// A view through the D435-like sensor (broadened view 4720016: a ring of the suite's
+/// ranges, noise along the rays 0.4% of its size, its depth in 1 mm steps) whose search
+/// rounds end on a least-squares fit, its sizes 40% off. Converged by the likelihood from
+/// there (a view whose points show noise, `Stage::ViewLikelihood`), it stands within the
+/// suite's rule; left out, the least-squares fit stands.
+#[test]
+fn a_sensor_view_refined_by_least_squares_ends_on_the_likelihood() {
+    use supertoroid::fit::ablation::Stage;
+    let seed = 4_720_016;
+    let case = supertoroid::suite::broad::view(seed);
+    let fitted = |skip: Vec<Stage>| {
+        let options = FitOptions {
+            seed,
+            skip,
+            ..Default::default()
+        };
+        let report = fit(&mut CpuEvaluator::new(), &case.points, &options).unwrap();
+        let (shape, pose) = report.fitted;
+        let errors = compare((&case.shape, &case.pose), (&shape, &pose));
+        let search = report.search.expect("the search's report");
+        (errors, search)
+    };
+    let (errors, search) = fitted(Vec::new());
+    assert!(errors.success(), "{errors:?}");
+    assert!(search.finalists >= 1, "{search:?}");
+    let (errors, search) = fitted(vec![Stage::ViewLikelihood]);
+    assert!(!errors.success(), "{errors:?}");
+    assert_eq!(search.finalists, 0, "{search:?}");
+}
+
 /// A view of a pinched ring (suite case 2460174: noise-free, 5% outliers, in its camera's
 /// frame, no options) that least squares fits as well by a closed slab lying across its
 /// hole: without the rings a closed fit may lie across, the fit is that slab, its hole

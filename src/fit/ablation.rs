@@ -23,6 +23,9 @@ pub enum Stage {
     SettleInferredView,
     /// a given viewpoint the fit contradicts dropped, the cloud searched again without it
     InconsistentViewpoint,
+    /// a view's least-squares fit, where its points show noise, converged by the
+    /// likelihood and standing in its place (the search's finalists)
+    ViewLikelihood,
     /// the noise model once more on up to 4000 points ([`super::search::polish`])
     PolishOnMorePoints,
     /// points far from every other set aside before the fit ([`super::isolated`])

@@ -415,22 +415,7 @@ pub(super) fn finalists(
                 return (best, 0);
             }
             if !best.modelled {
-                // (a precise cloud's least-squares fit converges by the likelihood once,
-                // for the comparison with its hollow reading and the rings across it)
-                let opened = p.hollowed(&best.candidate);
-                if opened.is_none() && p.rings_across(&best.candidate).is_empty() {
-                    return (best, 0);
-                }
-                let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
-                let Some(converged) = converged_for_comparison(p, &sample, best) else {
-                    return (best, 0);
-                };
-                let hollow = opened.and_then(|o| reading_finalist(p, &sample, o, best, converged));
-                let standing = match hollow {
-                    Some(hollow) => (hollow, 2),
-                    None => (best, 0),
-                };
-                return beside_rings_across(p, &sample, standing, Some(converged));
+                return precise_finalist(p, best, all_round[cloud]);
             }
             let sample = sample_of(p, &p.stage2_pts, all_round[cloud]);
             let close: Vec<Scored> = round2[cloud]
@@ -460,6 +445,48 @@ pub(super) fn finalists(
             beside_rings_across(p, &sample, standing, None)
         })
         .collect()
+}
+
+/// A precise cloud's fit after its finalists, `(fit, finalists converged)`: its
+/// least-squares fit `best`, converged by the likelihood on the stage-2 sample where a
+/// reading of it is weighed (its hollow reading, the rings across it), or where it is a
+/// view whose points show noise. A view's converged fit stands where it blurs the points
+/// by at most [`MAX_SIGMA_GROWTH`] times the noise they show (a noise-free view's
+/// likelihood, floored at [`REFINE_SIGMA_FLOOR`], does not): least squares weighs
+/// neither the sensor's density of points nor the surface it should have seen, and on a
+/// depth sensor's view, noisy along its rays and stepped in depth, it ends off the
+/// likeliest fit.
+fn precise_finalist(p: &Prepared, best: Scored, all_round: bool) -> (Scored, usize) {
+    let opened = p.hollowed(&best.candidate);
+    let noise = p
+        .viewpoint
+        .and(p.scatter())
+        .filter(|_| !p.skip.contains(&Stage::ViewLikelihood));
+    if opened.is_none() && p.rings_across(&best.candidate).is_empty() && noise.is_none() {
+        return (best, 0);
+    }
+    let sample = sample_of(p, &p.stage2_pts, all_round);
+    let Some(converged) = converged_for_comparison(p, &sample, best) else {
+        return (best, 0);
+    };
+    if noise.is_some_and(|noise| converged.sigma <= MAX_SIGMA_GROWTH * noise) {
+        let fit = Scored {
+            modelled: true,
+            ..converged
+        };
+        let hollow = opened.and_then(|o| reading_finalist(p, &sample, o, fit, fit));
+        let standing = match hollow {
+            Some(hollow) => (hollow, 3),
+            None => (fit, 1),
+        };
+        return beside_rings_across(p, &sample, standing, None);
+    }
+    let hollow = opened.and_then(|o| reading_finalist(p, &sample, o, best, converged));
+    let standing = match hollow {
+        Some(hollow) => (hollow, 2),
+        None => (best, 0),
+    };
+    beside_rings_across(p, &sample, standing, Some(converged))
 }
 
 /// A cloud's fit after its finalists, `(fit, finalists converged)`, against the rings it
