@@ -451,16 +451,21 @@ pub(super) fn finalists(
 /// least-squares fit `best`, converged by the likelihood on the stage-2 sample where a
 /// reading of it is weighed (its hollow reading, the rings across it), or where it is a
 /// view whose points show noise. A view's converged fit stands where it blurs the points
-/// by at most [`MAX_SIGMA_GROWTH`] times the noise they show (a noise-free view's
-/// likelihood, floored at [`REFINE_SIGMA_FLOOR`], does not): least squares weighs
+/// by at most [`MAX_SIGMA_GROWTH`] times the noise they show (so never on a precise
+/// view, whose likelihood is floored at [`REFINE_SIGMA_FLOOR`]): least squares weighs
 /// neither the sensor's density of points nor the surface it should have seen, and on a
 /// depth sensor's view, noisy along its rays and stepped in depth, it ends off the
 /// likeliest fit.
 fn precise_finalist(p: &Prepared, best: Scored, all_round: bool) -> (Scored, usize) {
     let opened = p.hollowed(&best.candidate);
+    // (the noise as round 2 reads it: the view's scatter, or the fit's residual scale
+    // where that is the smaller; a precise view, its noise under half the likelihood's
+    // floor, keeps its least-squares fit)
     let noise = p
         .viewpoint
         .and(p.scatter())
+        .map(|s| s.min(best.sigma))
+        .filter(|&noise| noise >= REFINE_SIGMA_FLOOR / MAX_SIGMA_GROWTH)
         .filter(|_| !p.skip.contains(&Stage::ViewLikelihood));
     if opened.is_none() && p.rings_across(&best.candidate).is_empty() && noise.is_none() {
         return (best, 0);
