@@ -460,9 +460,10 @@ fn precise_finalist(p: &Prepared, best: Scored, all_round: bool) -> (Scored, usi
     let opened = p.hollowed(&best.candidate);
     // (the noise as round 2 reads it: the view's scatter, or the fit's residual scale
     // where that is the smaller; a precise view, its noise under half the likelihood's
-    // floor, keeps its least-squares fit)
+    // floor, keeps its least-squares fit, as does a fit without the noise model)
     let noise = p
         .viewpoint
+        .filter(|_| p.noise_model)
         .and(p.scatter())
         .map(|s| s.min(best.sigma))
         .filter(|&noise| noise >= REFINE_SIGMA_FLOOR / MAX_SIGMA_GROWTH)
