@@ -1320,17 +1320,7 @@ fn a_tall_roll_seen_from_the_side_keeps_its_hole() {
     let across = axis.dot(case.pose.translation.normalize()).abs().acos();
     assert!(across.to_degrees() > 75.0, "{}", across.to_degrees());
     let outer = |s: &supertoroid::model::Shape| s.a1.max(s.a2) * (1.0 + s.a4);
-    let fitted = |skip: Vec<Stage>| {
-        let options = FitOptions {
-            seed: 4_100_069,
-            skip,
-            ..Default::default()
-        };
-        fit(&mut CpuEvaluator::new(), &case.points, &options)
-            .unwrap()
-            .fitted
-            .0
-    };
+    let fitted = |skip: Vec<Stage>| fit_broad_view(&case, 4_100_069, skip).fitted.0;
     let shape = fitted(Vec::new());
     assert!(shape.a4 > 1.0, "{shape:?}");
     assert!(
@@ -1340,6 +1330,21 @@ fn a_tall_roll_seen_from_the_side_keeps_its_hole() {
     );
     let closed = fitted(vec![Stage::HollowedReading]);
     assert!(closed.a4 < 1.0, "{closed:?}");
+}
+
+/// Broadened view `case` (`suite::broad::view(seed)`) fitted as `bench broad` fits it,
+/// with no option but its seed, leaving out the stages `skip`.
+fn fit_broad_view(
+    case: &Case,
+    seed: u64,
+    skip: Vec<supertoroid::fit::ablation::Stage>,
+) -> FitReport {
+    let options = FitOptions {
+        seed,
+        skip,
+        ..Default::default()
+    };
+    fit(&mut CpuEvaluator::new(), &case.points, &options).unwrap()
 }
 
 /// A tall roll seen from the side through the D435-like sensor (broadened view 4660005,
@@ -1353,16 +1358,7 @@ fn a_tall_roll_seen_from_the_side_gets_its_wall() {
     use supertoroid::fit::ablation::Stage;
     let seed = 4_660_005;
     let case = supertoroid::suite::broad::view(seed);
-    let fitted = |skip: Vec<Stage>| {
-        let options = FitOptions {
-            seed,
-            skip,
-            ..Default::default()
-        };
-        fit(&mut CpuEvaluator::new(), &case.points, &options)
-            .unwrap()
-            .fitted
-    };
+    let fitted = |skip: Vec<Stage>| fit_broad_view(&case, seed, skip).fitted;
     let (shape, pose) = fitted(Vec::new());
     let errors = compare((&case.shape, &case.pose), (&shape, &pose));
     assert!(
@@ -1385,12 +1381,7 @@ fn a_sensor_view_refined_by_least_squares_ends_on_the_likelihood() {
     let seed = 4_720_016;
     let case = supertoroid::suite::broad::view(seed);
     let fitted = |skip: Vec<Stage>| {
-        let options = FitOptions {
-            seed,
-            skip,
-            ..Default::default()
-        };
-        let report = fit(&mut CpuEvaluator::new(), &case.points, &options).unwrap();
+        let report = fit_broad_view(&case, seed, skip);
         let (shape, pose) = report.fitted;
         let errors = compare((&case.shape, &case.pose), (&shape, &pose));
         let search = report.search.expect("the search's report");
