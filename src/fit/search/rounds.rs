@@ -475,22 +475,21 @@ fn precise_finalist(p: &Prepared, best: Scored, all_round: bool) -> (Scored, usi
     let Some(converged) = converged_for_comparison(p, &sample, best) else {
         return (best, 0);
     };
-    if noise.is_some_and(|noise| converged.sigma <= MAX_SIGMA_GROWTH * noise) {
+    // (the view's converged fit, where it stands, is the finalist its readings meet;
+    // otherwise the least-squares fit, weighed as converged)
+    let (fit, counted) = if noise.is_some_and(|noise| converged.sigma <= MAX_SIGMA_GROWTH * noise) {
         let fit = Scored {
             modelled: true,
             ..converged
         };
-        let hollow = opened.and_then(|o| reading_finalist(p, &sample, o, fit, fit));
-        let standing = match hollow {
-            Some(hollow) => (hollow, 3),
-            None => (fit, 1),
-        };
-        return beside_rings_across(p, &sample, standing, None);
-    }
-    let hollow = opened.and_then(|o| reading_finalist(p, &sample, o, best, converged));
+        (fit, 1)
+    } else {
+        (best, 0)
+    };
+    let hollow = opened.and_then(|o| reading_finalist(p, &sample, o, fit, converged));
     let standing = match hollow {
-        Some(hollow) => (hollow, 2),
-        None => (best, 0),
+        Some(hollow) => (hollow, counted + 2),
+        None => (fit, counted),
     };
     beside_rings_across(p, &sample, standing, Some(converged))
 }
