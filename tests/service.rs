@@ -676,8 +676,13 @@ fn a_batch_fits_on_the_gpu_as_well_as_single_requests() {
 
 #[test]
 fn concurrent_requests_all_succeed_and_match_the_sequential_results() {
-    // the GPU evaluator (lavapipe in CI): the service shares one context among requests
-    let server = Server::start(gpu_config());
+    // the GPU evaluator (lavapipe in CI): the service shares one context among requests;
+    // 32 fits queue behind its workers, which on a slow runner is longer than the default
+    // timeout (the timeout's own test is elsewhere): this one is about the answers
+    let server = Server::start(ServiceConfig {
+        request_timeout: 600.0,
+        ..gpu_config()
+    });
     let c = client();
     let ready: Value = c.get(server.url("/readyz")).send().unwrap().json().unwrap();
     if std::env::var("CI").is_ok_and(|v| v == "true") {
