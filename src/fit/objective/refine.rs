@@ -57,13 +57,28 @@ pub fn refine(
     limits: &Limits,
     max_iterations: usize,
 ) -> Refined {
-    refine_on(
+    refine_until(data, start, sigma, limits, max_iterations, STOP_DECREASE)
+}
+
+/// [`refine`] ended by two steps in a row that lower the objective by less than
+/// `decrease` (nats a point) instead of [`STOP_DECREASE`].
+pub fn refine_until(
+    data: &Data,
+    start: &Candidate,
+    sigma: f64,
+    limits: &Limits,
+    max_iterations: usize,
+    decrease: f64,
+) -> Refined {
+    let area_grid = super::normaliser::FINE;
+    refine_with(
         data,
         start,
         sigma,
         limits,
         max_iterations,
-        super::normaliser::FINE,
+        area_grid,
+        decrease,
     )
 }
 
@@ -76,6 +91,26 @@ pub fn refine_on(
     limits: &Limits,
     max_iterations: usize,
     area_grid: (usize, usize),
+) -> Refined {
+    refine_with(
+        data,
+        start,
+        sigma,
+        limits,
+        max_iterations,
+        area_grid,
+        STOP_DECREASE,
+    )
+}
+
+fn refine_with(
+    data: &Data,
+    start: &Candidate,
+    sigma: f64,
+    limits: &Limits,
+    max_iterations: usize,
+    area_grid: (usize, usize),
+    decrease: f64,
 ) -> Refined {
     let mut objective = Objective {
         area_grid,
@@ -92,7 +127,7 @@ pub fn refine_on(
     };
     let stopping = Stopping {
         max_iterations,
-        decrease: STOP_DECREASE,
+        decrease,
         step: 1e-7,
         // (candidates are ranked by their values here: each is refined on to the
         // decrease test, not stopped a standard error short)

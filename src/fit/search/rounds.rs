@@ -562,11 +562,12 @@ fn narrower_where_likelier(p: &Prepared, sample: &Sample, hollow: Scored) -> Sco
 }
 
 /// A least-squares `finalist` converged by the likelihood on `sample`, to be weighed
-/// against a reading of it; None where the refinement collapses.
+/// against a reading of it, ended at [`VIEW_STOP_DECREASE`]; None where the refinement
+/// collapses.
 fn converged_for_comparison(p: &Prepared, sample: &Sample, finalist: Scored) -> Option<Scored> {
     let start = comparison_start(finalist);
     moved(
-        converge(p, sample, start, REFINE_ITERATIONS),
+        converge_until(p, sample, start, REFINE_ITERATIONS, VIEW_STOP_DECREASE),
         &finalist.candidate,
     )
 }
