@@ -36,9 +36,7 @@ pub mod normaliser;
 mod refine;
 pub mod tables;
 
-pub use refine::{
-    Limits, Refined, STOP_DECREASE, refine, refine_on, refine_until, value, value_on,
-};
+pub use refine::{Limits, Refined, STOP_DECREASE, refine, refine_on, value, value_on};
 
 use crate::eval::{Candidate, GpuObjective};
 use crate::fit::sight::Sight;

@@ -57,53 +57,22 @@ pub fn refine(
     limits: &Limits,
     max_iterations: usize,
 ) -> Refined {
-    refine_until(data, start, sigma, limits, max_iterations, STOP_DECREASE)
-}
-
-/// [`refine`] ended by two steps in a row that lower the objective by less than
-/// `decrease` (nats a point) instead of [`STOP_DECREASE`].
-pub fn refine_until(
-    data: &Data,
-    start: &Candidate,
-    sigma: f64,
-    limits: &Limits,
-    max_iterations: usize,
-    decrease: f64,
-) -> Refined {
-    let area_grid = super::normaliser::FINE;
-    refine_with(
+    refine_on(
         data,
         start,
         sigma,
         limits,
         max_iterations,
-        area_grid,
-        decrease,
-    )
-}
-
-/// [`refine`] with the normaliser on `area_grid` ([`super::normaliser::COARSE`]: a
-/// quarter of its cost, for a few steps that rank candidates).
-pub fn refine_on(
-    data: &Data,
-    start: &Candidate,
-    sigma: f64,
-    limits: &Limits,
-    max_iterations: usize,
-    area_grid: (usize, usize),
-) -> Refined {
-    refine_with(
-        data,
-        start,
-        sigma,
-        limits,
-        max_iterations,
-        area_grid,
+        super::normaliser::FINE,
         STOP_DECREASE,
     )
 }
 
-fn refine_with(
+/// [`refine`] with the normaliser on `area_grid` ([`super::normaliser::COARSE`]: a
+/// quarter of its cost, for a few steps that rank candidates), ended by two steps in a
+/// row that lower the objective by less than `decrease` (nats a point; [`STOP_DECREASE`]
+/// unless the caller has reason for another).
+pub fn refine_on(
     data: &Data,
     start: &Candidate,
     sigma: f64,

@@ -490,12 +490,13 @@ fn converge_until(
     iterations: usize,
     decrease: f64,
 ) -> Scored {
-    let r = objective::refine_until(
+    let r = objective::refine_on(
         &sample.data(),
         &best.candidate,
         best.sigma,
         &p.likelihood_limits(&best.candidate),
         iterations,
+        objective::normaliser::FINE,
         decrease,
     );
     if collapsed(&r, best.sigma) {
@@ -557,6 +558,7 @@ fn likelihood_candidate(p: &Prepared, sample: &Sample, c: Scored, noise: f64) ->
         &p.likelihood_limits(&c.candidate),
         ROUND2_ITERATIONS,
         objective::normaliser::COARSE,
+        objective::STOP_DECREASE,
     );
     if collapsed(&r, start) {
         return None;
