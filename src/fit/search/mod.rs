@@ -82,13 +82,9 @@ pub const REFINE_ITERATIONS: usize = 30;
 /// A view's least-squares fit converged by the likelihood (`rounds::precise_finalist`)
 /// ends after two steps in a row that lower the objective by less than this (nats a
 /// point), not [`objective::STOP_DECREASE`]: from a fit already near the points the
-/// likelihood moves it in its first few steps and then creeps. On the service
-/// benchmark's ring (a depth frame's mask) the step takes 4-6 iterations (25-40 ms)
-/// against 7-9 (55-85 ms), its shape the same to the fourth digit; every verdict and
-/// warning the same on the fresh broadened views 4820000 and 4830000 (320), suite set
-/// 2680000 (camera frame) and boxes 750000 (8 frames); views that start far off still
-/// walk on to the 30-step cap. Capping the step at 3 iterations instead lost 2 of
-/// 4820000's 160 views, fits that needed 23-30 steps (`docs/fit.md`).
+/// likelihood moves it in its first few steps and then creeps, while a fit that starts
+/// far off still walks on to [`REFINE_ITERATIONS`] (a fixed cap would cut those short).
+/// What it saves and what it was checked on: `docs/fit.md`.
 pub const VIEW_STOP_DECREASE: f64 = 1e-3;
 /// Likelihood iterations and points each round-2 candidate gets before the choice.
 pub const ROUND2_ITERATIONS: usize = 5;
