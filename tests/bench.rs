@@ -262,6 +262,10 @@ fn bench_synthetic_and_scaling_write_every_field() {
                 "a4",
                 "eps",
                 "t_total_ms",
+                "t_stage1_ms",
+                "t_stage2_ms",
+                "t_noise_model_ms",
+                "t_polish_ms",
                 "noise_ratio",
                 "refused",
                 "uncertain_warning",
@@ -273,6 +277,17 @@ fn bench_synthetic_and_scaling_write_every_field() {
                 "warned",
             ],
         );
+        // the stages' times are parts of the fit's: the noise model of stage 2, and stage 1,
+        // stage 2 and the polish of the total
+        let ms = |key: &str| c[key].as_f64().unwrap();
+        assert!(ms("t_stage1_ms") > 0.0 && ms("t_stage2_ms") > 0.0, "{c}");
+        assert!(
+            (0.0..=ms("t_stage2_ms")).contains(&ms("t_noise_model_ms")),
+            "{c}"
+        );
+        assert!(ms("t_polish_ms") >= 0.0, "{c}");
+        let parts = ms("t_stage1_ms") + ms("t_stage2_ms") + ms("t_polish_ms");
+        assert!(parts <= ms("t_total_ms") + 1e-6, "{c}");
         // the shape's standard errors over their tolerances (null where there are none),
         // and the uncertain-shape warning among the warnings
         let uncertainty = c["uncertainty"].as_f64();

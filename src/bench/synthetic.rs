@@ -42,6 +42,12 @@ pub struct Case {
     pub a4: f64,
     pub eps: f64,
     pub t_total_ms: f64,
+    /// the fit's time by stage (its `timing_ms`): stage 1, stage 2 (the search) and the
+    /// noise model's share of stage 2, the polish (zero where it did not run)
+    pub t_stage1_ms: f64,
+    pub t_stage2_ms: f64,
+    pub t_noise_model_ms: f64,
+    pub t_polish_ms: f64,
     /// the true noise sigma over the true shape's smallest half-axis
     pub noise_ratio: f64,
     /// the object screen refused the cloud (`no_object_found`): a failed case
@@ -95,6 +101,10 @@ impl Case {
             a4: f64::NAN,
             eps: f64::NAN,
             t_total_ms: f64::NAN,
+            t_stage1_ms: f64::NAN,
+            t_stage2_ms: f64::NAN,
+            t_noise_model_ms: f64::NAN,
+            t_polish_ms: f64::NAN,
             noise_ratio: f64::NAN,
             refused: true,
             uncertain_warning: false,
@@ -185,6 +195,10 @@ pub struct ErrorStats {
     pub a4: Stats,
     pub eps: Stats,
     pub t_total_ms: Stats,
+    pub t_stage1_ms: Stats,
+    pub t_stage2_ms: Stats,
+    pub t_noise_model_ms: Stats,
+    pub t_polish_ms: Stats,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -274,6 +288,10 @@ fn error_stats(cases: &[&Case]) -> ErrorStats {
         a4: col(|c| c.a4),
         eps: col(|c| c.eps),
         t_total_ms: col(|c| c.t_total_ms),
+        t_stage1_ms: col(|c| c.t_stage1_ms),
+        t_stage2_ms: col(|c| c.t_stage2_ms),
+        t_noise_model_ms: col(|c| c.t_noise_model_ms),
+        t_polish_ms: col(|c| c.t_polish_ms),
     }
 }
 
@@ -456,6 +474,17 @@ fn fit_case(
         a4: e.a4,
         eps: e.eps,
         t_total_ms: report.timing_ms.total,
+        t_stage1_ms: report.timing_ms.stage1,
+        t_stage2_ms: report.timing_ms.stage2,
+        t_noise_model_ms: report.timing_ms.noise_model,
+        t_polish_ms: report
+            .timing_ms
+            .stages
+            .get(&fit::ablation::name(
+                fit::ablation::Stage::PolishOnMorePoints,
+            ))
+            .copied()
+            .unwrap_or(0.0),
         noise_ratio: noise * case.shape.size() / case.shape.thinnest_half_axis(),
         refused: false,
         uncertain_warning: report.warnings.iter().any(|w| w.starts_with("uncertain")),
@@ -564,11 +593,11 @@ impl Report for SyntheticReport {
 
     fn csv(&self) -> String {
         let mut s = String::from(
-            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,noise_ratio,refused,uncertain_warning,attainable,misfit_warning,off_points_warning,median_over_size,median_over_scatter,visible_coverage,warned,uncertainty,from_truth\n",
+            "seed,partial,noise,outliers,success,centre,axis_degrees,sizes,a4,eps,t_total_ms,t_stage1_ms,t_stage2_ms,t_noise_model_ms,t_polish_ms,noise_ratio,refused,uncertain_warning,attainable,misfit_warning,off_points_warning,median_over_size,median_over_scatter,visible_coverage,warned,uncertainty,from_truth\n",
         );
         for c in &self.cases {
             s += &format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 c.seed,
                 c.partial,
                 c.noise,
@@ -580,6 +609,10 @@ impl Report for SyntheticReport {
                 c.a4,
                 c.eps,
                 c.t_total_ms,
+                c.t_stage1_ms,
+                c.t_stage2_ms,
+                c.t_noise_model_ms,
+                c.t_polish_ms,
                 c.noise_ratio,
                 c.refused,
                 c.uncertain_warning,
@@ -740,6 +773,21 @@ impl Report for SyntheticReport {
                 f(&e.sizes),
                 f(&e.a4),
                 f(&e.eps),
+                f(&e.t_total_ms)
+            );
+        }
+        md += "\nTime by stage [ms] (median / 90th percentile; the noise model is part of stage 2, the polish zero where it did not run):\n\n| | stage 1 | stage 2 | noise model | polish | total |\n|---|---|---|---|---|---|\n";
+        for (name, e) in [
+            ("full", &self.errors_full),
+            ("partial", &self.errors_partial),
+        ] {
+            let f = |s: &Stats| format!("{:.0} / {:.0}", s.median, s.p90);
+            md += &format!(
+                "| {name} | {} | {} | {} | {} | {} |\n",
+                f(&e.t_stage1_ms),
+                f(&e.t_stage2_ms),
+                f(&e.t_noise_model_ms),
+                f(&e.t_polish_ms),
                 f(&e.t_total_ms)
             );
         }
