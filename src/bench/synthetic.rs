@@ -760,13 +760,18 @@ impl Report for SyntheticReport {
                 100.0 * b.successes as f64 / b.cases.max(1) as f64
             );
         }
-        md += "\nError distributions (median / 90th percentile / max):\n\n| | centre / size | axis [deg] | sizes (rel.) | a4 (rel.) | eps | time [ms] |\n|---|---|---|---|---|---|---|\n";
+        let mut errors = String::from(
+            "\nError distributions (median / 90th percentile / max):\n\n| | centre / size | axis [deg] | sizes (rel.) | a4 (rel.) | eps | time [ms] |\n|---|---|---|---|---|---|---|\n",
+        );
+        let mut times = String::from(
+            "\nTime by stage [ms] (median / 90th percentile; the noise model is part of stage 2, the polish zero where it did not run):\n\n| | stage 1 | stage 2 | noise model | polish | total |\n|---|---|---|---|---|---|\n",
+        );
         for (name, e) in [
             ("full", &self.errors_full),
             ("partial", &self.errors_partial),
         ] {
             let f = |s: &Stats| format!("{:.3} / {:.3} / {:.3}", s.median, s.p90, s.max);
-            md += &format!(
+            errors += &format!(
                 "| {name} | {} | {} | {} | {} | {} | {} |\n",
                 f(&e.centre),
                 f(&e.axis_degrees),
@@ -775,22 +780,18 @@ impl Report for SyntheticReport {
                 f(&e.eps),
                 f(&e.t_total_ms)
             );
-        }
-        md += "\nTime by stage [ms] (median / 90th percentile; the noise model is part of stage 2, the polish zero where it did not run):\n\n| | stage 1 | stage 2 | noise model | polish | total |\n|---|---|---|---|---|---|\n";
-        for (name, e) in [
-            ("full", &self.errors_full),
-            ("partial", &self.errors_partial),
-        ] {
-            let f = |s: &Stats| format!("{:.0} / {:.0}", s.median, s.p90);
-            md += &format!(
+            let ms = |s: &Stats| format!("{:.0} / {:.0}", s.median, s.p90);
+            times += &format!(
                 "| {name} | {} | {} | {} | {} | {} |\n",
-                f(&e.t_stage1_ms),
-                f(&e.t_stage2_ms),
-                f(&e.t_noise_model_ms),
-                f(&e.t_polish_ms),
-                f(&e.t_total_ms)
+                ms(&e.t_stage1_ms),
+                ms(&e.t_stage2_ms),
+                ms(&e.t_noise_model_ms),
+                ms(&e.t_polish_ms),
+                ms(&e.t_total_ms)
             );
         }
+        md += &errors;
+        md += &times;
         for p in &self.pictures {
             md += &format!("\n![a failed case: cloud and fit]({p})\n");
         }
