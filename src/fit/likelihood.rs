@@ -309,6 +309,9 @@ impl Problem<'_> {
         let mut d_log_areas = Vec::new();
         let mut d_log_area = [0.0; 6];
         if with_derivatives {
+            let viewpoint_canonical = view
+                .as_ref()
+                .map(|view| rotation.inverse() * (view.viewpoint - translation));
             // (each kept cell's six derivatives in closed form, `derivatives`)
             (d_cells, d_log_areas) = kept
                 .par_iter()
@@ -316,14 +319,16 @@ impl Problem<'_> {
                     let d = curves.cell(&shape, j / sectors, j % sectors, normals[j]);
                     let d_world = d.centre.map(|c| rotation * c);
                     let mut d_log = d.log_area;
-                    if let Some(view) = &view {
+                    if let Some(viewpoint) = viewpoint_canonical {
+                        // (the dot products in the body's frame, the viewpoint taken there)
+                        let q = canonical[j] - viewpoint;
                         for k in 0..6 {
                             d_log[k] = d_log_view_weight(
                                 d.log_area[k],
-                                d_world[k],
-                                rotation * d.normal[k],
-                                world_normals[j],
-                                cells[j] - view.viewpoint,
+                                d.centre[k],
+                                d.normal[k],
+                                normals[j],
+                                q,
                             );
                         }
                     }

@@ -1,18 +1,18 @@
 //! The surface grid's cells differentiated in the shape in closed form: each corner of
 //! the grid is r_t of eq. (2) at polar angles ([`Curves::point`]), so its derivative
-//! in a size, in a4 or in an exponent is a product of the two curves' points and their
-//! derivatives; a cell's centre is the mean of its corners, its area and normal come
-//! from the cross product of its diagonals.
+//! in a size is its own coordinate over that size, and in a4 or in an exponent a product
+//! of the two curves' points and their derivatives; a cell's centre is the mean of its
+//! corners, its area and normal come from the cross product of its diagonals.
 
 use super::grid::Curves;
 use glam::DVec3;
 
 impl Curves {
-    /// Corner (i, j) of the grid (canonical) and its derivatives in the six shape
-    /// parameters a1 a2 a3 a4 eps1 eps2.
-    fn corner(&self, shape: &[f64; 6], i: usize, j: usize) -> (DVec3, [DVec3; 6]) {
+    /// Corner (i, j) of the grid (canonical) and its derivatives in a4, eps1 and eps2 (the
+    /// sizes' are the corner's own coordinates, [`Curves::cell`]).
+    fn corner(&self, shape: &[f64; 6], i: usize, j: usize) -> (DVec3, [DVec3; 3]) {
         let [a1, a2, a3, a4, _, _] = *shape;
-        let (c, z, dc, dz) = self.section[i];
+        let (c, _, dc, dz) = self.section[i];
         let (x, y, dx, dy) = self.top[j];
         // (an open section's ends lie on the axis: r held at zero there)
         let (r, dr_da4, dr_deps1) = if a4 + c > 0.0 {
@@ -23,9 +23,6 @@ impl Curves {
         (
             self.point(shape, i, j),
             [
-                DVec3::new(r * x, 0.0, 0.0),
-                DVec3::new(0.0, r * y, 0.0),
-                DVec3::new(0.0, 0.0, z),
                 DVec3::new(a1 * dr_da4 * x, a2 * dr_da4 * y, 0.0),
                 DVec3::new(a1 * dr_deps1 * x, a2 * dr_deps1 * y, a3 * dz),
                 DVec3::new(a1 * r * dx, a2 * r * dy, 0.0),
@@ -37,6 +34,7 @@ impl Curves {
     /// d ln area and d normal (unit, canonical) per parameter; `normal` is the cell's
     /// outward unit normal, which orients the diagonals' cross product.
     pub fn cell(&self, shape: &[f64; 6], i: usize, j: usize, normal: DVec3) -> CellDerivatives {
+        let [a1, a2, a3, _, _, _] = *shape;
         let (c00, d00) = self.corner(shape, i, j);
         let (c10, d10) = self.corner(shape, i + 1, j);
         let (c01, d01) = self.corner(shape, i, j + 1);
@@ -54,16 +52,36 @@ impl Curves {
         } else {
             DVec3::ZERO
         };
+        let centre = (c00 + c10 + c01 + c11) * 0.25;
         let mut out = CellDerivatives {
-            centre: [DVec3::ZERO; 6],
+            centre: [
+                DVec3::new(centre.x / a1, 0.0, 0.0),
+                DVec3::new(0.0, centre.y / a2, 0.0),
+                DVec3::new(0.0, 0.0, centre.z / a3),
+                DVec3::ZERO,
+                DVec3::ZERO,
+                DVec3::ZERO,
+            ],
             log_area: [0.0; 6],
             normal: [DVec3::ZERO; 6],
         };
-        for k in 0..6 {
-            out.centre[k] = (d00[k] + d10[k] + d01[k] + d11[k]) * 0.25;
-            if length > 0.0 {
-                let d_normal =
-                    outward * ((d11[k] - d00[k]).cross(v) + u.cross(d10[k] - d01[k])) / length;
+        // a size stretches the grid along its own axis, each corner P by (P.x / a1, 0, 0)
+        // for a1: so d(u x v) = (0, N.y, N.z) / a1 (and likewise for a2, a3), N = u x v
+        let mut d_normals = [
+            DVec3::new(0.0, normal.y, normal.z) / a1,
+            DVec3::new(normal.x, 0.0, normal.z) / a2,
+            DVec3::new(normal.x, normal.y, 0.0) / a3,
+            DVec3::ZERO,
+            DVec3::ZERO,
+            DVec3::ZERO,
+        ];
+        for k in 0..3 {
+            out.centre[3 + k] = (d00[k] + d10[k] + d01[k] + d11[k]) * 0.25;
+            d_normals[3 + k] = outward * ((d11[k] - d00[k]).cross(v) + u.cross(d10[k] - d01[k]));
+        }
+        if length > 0.0 {
+            for k in 0..6 {
+                let d_normal = d_normals[k] / length;
                 out.log_area[k] = unit.dot(d_normal);
                 out.normal[k] = d_normal - unit * out.log_area[k];
             }

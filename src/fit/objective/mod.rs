@@ -291,16 +291,34 @@ struct Window<'a> {
     radius: Vec<f64>,
     /// per sweep sample: C x D, its point across its tangent step
     cross: Vec<f64>,
+    /// per sweep sample, what the per-point sums read of it, side by side
+    samples: Vec<SweepSample>,
+    /// the section nodes by their height w (canonical z over a3), each with its index:
+    /// a point meets only the nodes within the cutoff of its own height
+    by_height: Vec<(f64, usize)>,
     normaliser: &'a Normaliser,
     var: f64,
     cut: f64,
     floor: f64,
 }
 
+/// A sweep sample as the per-point sums read it: its point C, tangent step D, C x D and
+/// their eps2-derivatives, and its sector of the normaliser's grid.
+#[derive(Clone, Copy)]
+struct SweepSample {
+    point: [f64; 2],
+    tangent: [f64; 2],
+    cross: f64,
+    d_point: [f64; 2],
+    d_tangent: [f64; 2],
+    d_cross: f64,
+    sector: usize,
+}
+
 impl<'a> Window<'a> {
     fn new(grid: &Grid, shape: &Shape, sigma: f64, normaliser: &'a Normaliser) -> Self {
         let sweep = SweepTable::new(grid, shape.a1, shape.a2, shape.eps2);
-        let sectors = (0..grid.sweep)
+        let sectors: Vec<usize> = (0..grid.sweep)
             .map(|m| normaliser.sector_of(m as f64 * sweep.step))
             .collect();
         let polar = sweep
@@ -309,18 +327,45 @@ impl<'a> Window<'a> {
             .map(|[x, y]| y.atan2(*x).rem_euclid(TAU))
             .collect();
         let radius = sweep.point.iter().map(|[x, y]| x.hypot(*y)).collect();
-        let cross = sweep
+        let cross: Vec<f64> = sweep
             .point
             .iter()
             .zip(&sweep.tangent)
             .map(|([cx, cy], [dx, dy])| cx * dy - cy * dx)
             .collect();
+        let samples = (0..grid.sweep)
+            .map(|m| {
+                let [cx, cy] = sweep.point[m];
+                let [dx, dy] = sweep.tangent[m];
+                let [dcx, dcy] = sweep.d_point[m];
+                let [ddx, ddy] = sweep.d_tangent[m];
+                SweepSample {
+                    point: [cx, cy],
+                    tangent: [dx, dy],
+                    cross: cross[m],
+                    d_point: [dcx, dcy],
+                    d_tangent: [ddx, ddy],
+                    d_cross: dcx * dy + cx * ddy - dcy * dx - cy * ddx,
+                    sector: sectors[m],
+                }
+            })
+            .collect();
+        let section = SectionTable::new(grid, shape.eps1);
+        let mut by_height: Vec<(f64, usize)> = section
+            .point
+            .iter()
+            .enumerate()
+            .map(|(k, &[_, w])| (w, k))
+            .collect();
+        by_height.sort_by(|a, b| a.0.total_cmp(&b.0));
         Self {
             cross,
+            samples,
+            by_height,
             shape: *shape,
             polar,
             radius,
-            section: SectionTable::new(grid, shape.eps1),
+            section,
             rings: grid
                 .section
                 .iter()
@@ -368,43 +413,42 @@ impl<'a> Window<'a> {
 
     /// Adds the partials of ln(element weight) in the shape (past ln lambda's) to
     /// `log_weight`, and the element's share of d sum / d sight (`term` its kernel term)
-    /// to `by_sight`: section node k by sweep sample m, its area without a sight line,
+    /// to `by_sight`: section node k by sweep sample `s`, its area without a sight line,
     /// seen along `sight` its projected area (its halves' n·v, `facing`).
     fn add_log_weight_partials(
         &self,
         k: usize,
-        m: usize,
+        s: &SweepSample,
         sight: Option<(DVec3, [f64; 2])>,
         term: f64,
         log_weight: &mut [f64; 6],
         by_sight: &mut DVec3,
     ) {
-        let Shape { a1, a2, a3, .. } = self.shape;
-        let [cx, cy] = self.sweep.point[m];
-        let [dx, dy] = self.sweep.tangent[m];
-        let cross = self.cross[m];
-        let [dcx, dcy] = self.sweep.d_point[m];
-        let [ddx, ddy] = self.sweep.d_tangent[m];
-        let d_cross = dcx * dy + cx * ddy - dcy * dx - cy * ddx;
+        let a3 = self.shape.a3;
+        let (inv_a1, inv_a2) = (1.0 / self.shape.a1, 1.0 / self.shape.a2);
+        let [dx, dy] = s.tangent;
+        let [ddx, ddy] = s.d_tangent;
+        let (cross, d_cross) = (s.cross, s.d_cross);
         match sight {
             Some((v, facing)) => {
                 // d ln sum_h (-facing_h) over the halves that face the sensor
                 let total: f64 = facing.iter().map(|f| (-f).max(0.0)).sum();
+                let per = 1.0 / -total;
                 let turn = dy * v.x - dx * v.y;
+                let (tc_v, by_tw) = (cross * v.z, DVec3::new(a3 * dy, -a3 * dx, 0.0));
                 for h in 0..2 {
                     if facing[h] >= 0.0 {
                         continue;
                     }
                     let [tc, tw] = self.section.halves[k][h];
                     let [dtc, dtw] = self.section.d_halves[k][h];
-                    let per = 1.0 / -total;
                     // (D scales with a1 along x and a2 along y, the cross with a1·a2)
-                    log_weight[0] += (a3 * tw * (-dx * v.y) - tc * cross * v.z) / a1 * per;
-                    log_weight[1] += (a3 * tw * (dy * v.x) - tc * cross * v.z) / a2 * per;
+                    log_weight[0] += (a3 * tw * (-dx * v.y) - tc * tc_v) * inv_a1 * per;
+                    log_weight[1] += (a3 * tw * (dy * v.x) - tc * tc_v) * inv_a2 * per;
                     log_weight[2] += tw * turn * per;
-                    log_weight[4] += (a3 * dtw * turn - dtc * cross * v.z) * per;
+                    log_weight[4] += (a3 * dtw * turn - dtc * tc_v) * per;
                     log_weight[5] += (a3 * tw * (ddy * v.x - ddx * v.y) - tc * d_cross * v.z) * per;
-                    *by_sight += term * DVec3::new(a3 * tw * dy, -a3 * tw * dx, -tc * cross) * per;
+                    *by_sight += (term * per) * DVec3::new(tw * by_tw.x, tw * by_tw.y, -tc * cross);
                 }
             }
             None => {
@@ -413,21 +457,19 @@ impl<'a> Window<'a> {
                 let areas = self.half_areas(k, dx, dy, cross);
                 let total = areas[0] + areas[1];
                 for h in 0..2 {
-                    let [tc, tw] = self.section.halves[k][h];
-                    let [dtc, dtw] = self.section.d_halves[k][h];
-                    let per = 1.0 / (areas[h].max(1e-300) * total);
                     if areas[h] == 0.0 {
                         continue;
                     }
-                    log_weight[0] +=
-                        (a3 * a3 * tw * tw * dx * dx + tc * tc * cross * cross) / a1 * per;
-                    log_weight[1] +=
-                        (a3 * a3 * tw * tw * dy * dy + tc * tc * cross * cross) / a2 * per;
+                    let [tc, tw] = self.section.halves[k][h];
+                    let [dtc, dtw] = self.section.d_halves[k][h];
+                    let per = 1.0 / (areas[h] * total);
+                    let (tw2, tc2x2) = (a3 * a3 * tw * tw, tc * tc * cross * cross);
+                    log_weight[0] += (tw2 * dx * dx + tc2x2) * inv_a1 * per;
+                    log_weight[1] += (tw2 * dy * dy + tc2x2) * inv_a2 * per;
                     log_weight[2] += a3 * tw * tw * dd * per;
                     log_weight[4] += (a3 * a3 * tw * dtw * dd + tc * dtc * cross * cross) * per;
-                    log_weight[5] += (a3 * a3 * tw * tw * (dx * ddx + dy * ddy)
-                        + tc * tc * cross * d_cross)
-                        * per;
+                    log_weight[5] +=
+                        (tw2 * (dx * ddx + dy * ddy) + tc * tc * cross * d_cross) * per;
                 }
             }
         }
@@ -437,12 +479,14 @@ impl<'a> Window<'a> {
     /// viewpoint to the point) over the surface within the cutoff, with its partials.
     fn sums(&self, q: DVec3, sight: Option<DVec3>, with_gradient: bool) -> PointSums {
         let Shape { a1, a2, a3, a4, .. } = self.shape;
-        let _ = (a1, a2);
+        let (inv_a1, inv_a2) = (1.0 / a1, 1.0 / a2);
         let mut out = PointSums::default();
-        let count = self.sweep.point.len();
+        let count = self.samples.len();
         let rho = q.x.hypot(q.y);
         let cut2 = self.cut * self.cut;
-        let sight_length = sight.map_or(1.0, |v| v.length().max(1e-300));
+        let inv_var = 1.0 / self.var;
+        let exponent = -0.5 * inv_var;
+        let inv_sight_length = sight.map_or(1.0, |v| 1.0 / v.length().max(1e-300));
         // every surface point within the cutoff lies, seen along the axis, in the disc of
         // that radius about the point: within asin(cut / rho) of its polar angle (all
         // round where the disc holds the axis), whatever its section node
@@ -453,7 +497,7 @@ impl<'a> Window<'a> {
             let polar = q.y.atan2(q.x).rem_euclid(TAU);
             self.sweep_range(polar - half, polar + half)
         };
-        // the window's sweep indices, wrapped at the seam (two plain runs, no division
+        // the window's sweep samples, wrapped at the seam (two plain runs, no division
         // per step); their radii bound how near a node's sweep comes
         let window = [
             first..count.min(first + span),
@@ -462,12 +506,14 @@ impl<'a> Window<'a> {
         let (r_lo, r_hi) = window
             .clone()
             .into_iter()
-            .flatten()
-            .map(|m| self.radius[m])
-            .fold((f64::INFINITY, 0.0f64), |(lo, hi), r| {
+            .flat_map(|run| &self.radius[run])
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), &r| {
                 (lo.min(r), hi.max(r))
             });
-        for k in 0..self.section.point.len() {
+        let sectors = self.normaliser.grid.1;
+        let height = |z: f64| self.by_height.partition_point(|&(w, _)| a3 * w < z);
+        let nodes = height(q.z - self.cut)..height(q.z + self.cut);
+        for &(_, k) in &self.by_height[nodes] {
             let [c, w] = self.section.point[k];
             let lambda = a4 + c;
             if lambda <= 0.0 {
@@ -481,16 +527,21 @@ impl<'a> Window<'a> {
             if gap * gap + dz * dz >= cut2 {
                 continue;
             }
+            // the node's ring of the normaliser's grid: which of its cells the sensor sees
+            let seen = (self.normaliser.visible.as_deref())
+                .map(|v| &v[self.rings[k] * sectors..][..sectors]);
+            let inv_lambda = 1.0 / lambda;
+            let [dc, dw] = self.section.d_point[k];
             for run in window.clone() {
-                for m in run {
-                    let [cx, cy] = self.sweep.point[m];
+                for s in &self.samples[run] {
+                    let [cx, cy] = s.point;
                     let (ex, ey) = (q.x - lambda * cx, q.y - lambda * cy);
                     let d2 = ex * ex + ey * ey + dz * dz;
                     if d2 >= cut2 {
                         continue;
                     }
-                    let [dx, dy] = self.sweep.tangent[m];
-                    let cross = self.cross[m];
+                    let [dx, dy] = s.tangent;
+                    let cross = s.cross;
                     // the surface element's weight: its area, or seen by the sensor its
                     // projected area lambda·(-n·v)/|v|, n = (a3 tw dy, -a3 tw dx, -tc cross)
                     // (the two halves of the section's step one by one: at a sharp corner
@@ -499,7 +550,7 @@ impl<'a> Window<'a> {
                     let mut facing = [0.0; 2];
                     let weight = match sight {
                         Some(v) => {
-                            if !self.normaliser.sees(self.rings[k], self.sectors[m]) {
+                            if seen.is_some_and(|row| !row[s.sector]) {
                                 continue;
                             }
                             facing = self.half_facing(k, dx, dy, cross, v);
@@ -507,48 +558,44 @@ impl<'a> Window<'a> {
                             if projected <= 0.0 {
                                 continue;
                             }
-                            lambda * projected / sight_length
+                            lambda * projected * inv_sight_length
                         }
                         None => lambda * self.half_areas(k, dx, dy, cross).iter().sum::<f64>(),
                     };
-                    let gauss = (-0.5 * d2 / self.var).exp();
+                    let gauss = (d2 * exponent).exp();
                     let term = weight * (gauss - self.floor);
                     out.sum += term;
                     if !with_gradient {
                         continue;
                     }
                     // d term = slope · d(-d²/2) + term · d ln weight
-                    let slope = weight * gauss / self.var;
+                    let slope = weight * gauss * inv_var;
                     let e = DVec3::new(ex, ey, dz);
                     out.by_point -= slope * e;
-                    let [dc, dw] = self.section.d_point[k];
-                    let [dcx, dcy] = self.sweep.d_point[m];
+                    let [dcx, dcy] = s.d_point;
                     let radial = ex * cx + ey * cy;
                     // through the surface position S = (lambda C, a3 w)
-                    let mut by_shape = [
-                        ex * lambda * cx / a1,
-                        ey * lambda * cy / a2,
+                    let by_shape = [
+                        ex * lambda * cx * inv_a1,
+                        ey * lambda * cy * inv_a2,
                         dz * w,
                         radial,
                         radial * dc + dz * a3 * dw,
                         lambda * (ex * dcx + ey * dcy),
                     ];
-                    for v in &mut by_shape {
-                        *v *= slope;
-                    }
                     out.ln_sigma += slope * d2;
                     // through the weight: ln lambda, then the area or the projected area
-                    let mut log_weight = [0.0, 0.0, 0.0, 1.0 / lambda, dc / lambda, 0.0];
+                    let mut log_weight = [0.0, 0.0, 0.0, inv_lambda, dc * inv_lambda, 0.0];
                     self.add_log_weight_partials(
                         k,
-                        m,
+                        s,
                         sight.map(|v| (v, facing)),
                         term,
                         &mut log_weight,
                         &mut out.by_sight,
                     );
                     for p in 0..6 {
-                        out.shape[p] += by_shape[p] + term * log_weight[p];
+                        out.shape[p] += slope * by_shape[p] + term * log_weight[p];
                     }
                 }
             }

@@ -162,6 +162,11 @@ fn log_area_derivatives(
 ) -> [f64; 12] {
     let shape = shape.to_array();
     let sectors = curves.sectors();
+    // the view weight's dot products are the same in the body's frame: the viewpoint
+    // taken there once spares each cell's twelve derivatives a turn into the world
+    let inverse = world.rotation.inverse();
+    let viewpoints = sensor
+        .map(|(Sight { viewpoint, .. }, _)| (viewpoint, inverse * (viewpoint - world.translation)));
     // each weighed cell's d ln weight, side by side; summed in the cells' order below
     let per_cell: Vec<(f64, [f64; 12])> = (0..weights.len())
         .into_par_iter()
@@ -169,20 +174,16 @@ fn log_area_derivatives(
         .map(|j| {
             let d = curves.cell(&shape, j / sectors, j % sectors, cells.normals[j]);
             let mut d_log = [0.0; 12];
-            let Some((Sight { viewpoint, .. }, _)) = sensor else {
+            let Some((viewpoint, viewpoint_canonical)) = viewpoints else {
                 d_log[..6].copy_from_slice(&d.log_area);
                 return (weights[j], d_log);
             };
-            let (centre, normal) = (world.cells[j], world.normals[j]);
+            let q = cells.centres[j] - viewpoint_canonical;
             for k in 0..6 {
-                d_log[k] = d_log_view_weight(
-                    d.log_area[k],
-                    world.rotation * d.centre[k],
-                    world.rotation * d.normal[k],
-                    normal,
-                    centre - viewpoint,
-                );
+                d_log[k] =
+                    d_log_view_weight(d.log_area[k], d.centre[k], d.normal[k], cells.normals[j], q);
             }
+            let (centre, normal) = (world.cells[j], world.normals[j]);
             let pose = d_log_view_weight_pose(normal, centre, world.translation, viewpoint);
             d_log[6..].copy_from_slice(&pose);
             (weights[j], d_log)
