@@ -138,25 +138,19 @@ fn packed(window: &Window) -> (Vec<[f32; 4]>, Vec<[f32; 4]>, Vec<u32>) {
             ]
         })
         .collect();
-    let table = &window.sweep;
-    let sweep = (0..table.point.len())
-        .flat_map(|m| {
-            let ([cx, cy], [dx, dy]) = (table.point[m], table.tangent[m]);
-            let ([dcx, dcy], [ddx, ddy]) = (table.d_point[m], table.d_tangent[m]);
+    let sweep = (window.samples.iter().zip(&window.polar).zip(&window.radius))
+        .flat_map(|((s, &polar), &radius)| {
+            let ([cx, cy], [dx, dy]) = (s.point, s.tangent);
+            let ([dcx, dcy], [ddx, ddy]) = (s.d_point, s.d_tangent);
             [
                 [f(cx), f(cy), f(dx), f(dy)],
                 [f(dcx), f(dcy), f(ddx), f(ddy)],
-                [
-                    f(window.cross[m]),
-                    f(window.polar[m]),
-                    f(window.radius[m]),
-                    0.0,
-                ],
+                [f(s.cross), f(polar), f(radius), 0.0],
             ]
         })
         .collect();
     let mut cells: Vec<u32> = window.rings.iter().map(|&r| r as u32).collect();
-    cells.extend(window.sectors.iter().map(|&s| s as u32));
+    cells.extend(window.samples.iter().map(|s| s.sector as u32));
     if let Some(visible) = &window.normaliser.visible {
         cells.extend(visible.iter().map(|&v| u32::from(v)));
     }

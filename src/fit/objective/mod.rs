@@ -281,18 +281,14 @@ impl<'a> Objective<'a> {
 struct Window<'a> {
     shape: Shape,
     section: SectionTable,
-    sweep: SweepTable,
-    /// per section node and per sweep sample: its cell of the normaliser's grid
+    /// per section node: its ring of the normaliser's grid
     rings: Vec<usize>,
-    sectors: Vec<usize>,
+    /// per sweep sample, what the per-point sums read of it, side by side
+    samples: Vec<SweepSample>,
     /// per sweep sample: its polar angle in the canonical x-y plane (rising in [0, 2 pi))
     /// and its distance from the axis
     polar: Vec<f64>,
     radius: Vec<f64>,
-    /// per sweep sample: C x D, its point across its tangent step
-    cross: Vec<f64>,
-    /// per sweep sample, what the per-point sums read of it, side by side
-    samples: Vec<SweepSample>,
     /// the section nodes by their height w (canonical z over a3), each with its index:
     /// a point meets only the nodes within the cutoff of its own height
     by_height: Vec<(f64, usize)>,
@@ -302,8 +298,9 @@ struct Window<'a> {
     floor: f64,
 }
 
-/// A sweep sample as the per-point sums read it: its point C, tangent step D, C x D and
-/// their eps2-derivatives, and its sector of the normaliser's grid.
+/// A sweep sample as the per-point sums read it: its point C, tangent step D, C x D (its
+/// point across its tangent step) and their eps2-derivatives, and its sector of the
+/// normaliser's grid.
 #[derive(Clone, Copy)]
 struct SweepSample {
     point: [f64; 2],
@@ -318,22 +315,7 @@ struct SweepSample {
 impl<'a> Window<'a> {
     fn new(grid: &Grid, shape: &Shape, sigma: f64, normaliser: &'a Normaliser) -> Self {
         let sweep = SweepTable::new(grid, shape.a1, shape.a2, shape.eps2);
-        let sectors: Vec<usize> = (0..grid.sweep)
-            .map(|m| normaliser.sector_of(m as f64 * sweep.step))
-            .collect();
-        let polar = sweep
-            .point
-            .iter()
-            .map(|[x, y]| y.atan2(*x).rem_euclid(TAU))
-            .collect();
-        let radius = sweep.point.iter().map(|[x, y]| x.hypot(*y)).collect();
-        let cross: Vec<f64> = sweep
-            .point
-            .iter()
-            .zip(&sweep.tangent)
-            .map(|([cx, cy], [dx, dy])| cx * dy - cy * dx)
-            .collect();
-        let samples = (0..grid.sweep)
+        let samples: Vec<SweepSample> = (0..grid.sweep)
             .map(|m| {
                 let [cx, cy] = sweep.point[m];
                 let [dx, dy] = sweep.tangent[m];
@@ -342,13 +324,21 @@ impl<'a> Window<'a> {
                 SweepSample {
                     point: [cx, cy],
                     tangent: [dx, dy],
-                    cross: cross[m],
+                    cross: cx * dy - cy * dx,
                     d_point: [dcx, dcy],
                     d_tangent: [ddx, ddy],
                     d_cross: dcx * dy + cx * ddy - dcy * dx - cy * ddx,
-                    sector: sectors[m],
+                    sector: normaliser.sector_of(m as f64 * sweep.step),
                 }
             })
+            .collect();
+        let polar = samples
+            .iter()
+            .map(|s| s.point[1].atan2(s.point[0]).rem_euclid(TAU))
+            .collect();
+        let radius = samples
+            .iter()
+            .map(|s| s.point[0].hypot(s.point[1]))
             .collect();
         let section = SectionTable::new(grid, shape.eps1);
         let mut by_height: Vec<(f64, usize)> = section
@@ -359,7 +349,6 @@ impl<'a> Window<'a> {
             .collect();
         by_height.sort_by(|a, b| a.0.total_cmp(&b.0));
         Self {
-            cross,
             samples,
             by_height,
             shape: *shape,
@@ -371,8 +360,6 @@ impl<'a> Window<'a> {
                 .iter()
                 .map(|&phi| normaliser.ring_of(phi))
                 .collect(),
-            sectors,
-            sweep,
             normaliser,
             var: sigma * sigma,
             cut: CUTOFF * sigma,

@@ -259,9 +259,9 @@ fn the_window_misses_nothing() {
                 if lambda <= 0.0 {
                     continue;
                 }
-                for m in 0..window.sweep.point.len() {
-                    let [cx, cy] = window.sweep.point[m];
-                    let [dx, dy] = window.sweep.tangent[m];
+                for sample in &window.samples {
+                    let [cx, cy] = sample.point;
+                    let [dx, dy] = sample.tangent;
                     let s = DVec3::new(lambda * cx, lambda * cy, shape.a3 * w);
                     let d2 = (q - s).length_squared();
                     if d2 >= window.cut * window.cut {
