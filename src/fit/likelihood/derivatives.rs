@@ -98,8 +98,8 @@ pub(crate) struct CellDerivatives {
 }
 
 /// d ln of a cell's view weight, area · |n·q| / |q|³ ([`super::View::weight`]), from d ln
-/// area, the world derivatives of its centre and unit normal, its world unit normal and
-/// q = centre - viewpoint.
+/// area, the derivatives of its centre and unit normal, its unit normal and q = centre -
+/// viewpoint, all in one frame (the world's or the body's: only dot products are taken).
 pub(crate) fn d_log_view_weight(
     d_log_area: f64,
     d_centre: DVec3,
