@@ -293,6 +293,8 @@ struct Window<'a> {
     /// a point meets only the nodes within the cutoff of its own height
     by_height: Vec<(f64, usize)>,
     normaliser: &'a Normaliser,
+    /// 1 / a1 and 1 / a2, taken once for every surface element's partials
+    inv_sizes: [f64; 2],
     var: f64,
     cut: f64,
     floor: f64,
@@ -361,6 +363,7 @@ impl<'a> Window<'a> {
                 .map(|&phi| normaliser.ring_of(phi))
                 .collect(),
             normaliser,
+            inv_sizes: [1.0 / shape.a1, 1.0 / shape.a2],
             var: sigma * sigma,
             cut: CUTOFF * sigma,
             floor: (-0.5 * CUTOFF * CUTOFF).exp(),
@@ -412,7 +415,7 @@ impl<'a> Window<'a> {
         by_sight: &mut DVec3,
     ) {
         let a3 = self.shape.a3;
-        let (inv_a1, inv_a2) = (1.0 / self.shape.a1, 1.0 / self.shape.a2);
+        let [inv_a1, inv_a2] = self.inv_sizes;
         let [dx, dy] = s.tangent;
         let [ddx, ddy] = s.d_tangent;
         let (cross, d_cross) = (s.cross, s.d_cross);
@@ -465,8 +468,8 @@ impl<'a> Window<'a> {
     /// The kernel sum of canonical point `q` (seen along canonical `sight`, from the
     /// viewpoint to the point) over the surface within the cutoff, with its partials.
     fn sums(&self, q: DVec3, sight: Option<DVec3>, with_gradient: bool) -> PointSums {
-        let Shape { a1, a2, a3, a4, .. } = self.shape;
-        let (inv_a1, inv_a2) = (1.0 / a1, 1.0 / a2);
+        let Shape { a3, a4, .. } = self.shape;
+        let [inv_a1, inv_a2] = self.inv_sizes;
         let mut out = PointSums::default();
         let count = self.samples.len();
         let rho = q.x.hypot(q.y);
